@@ -1,0 +1,45 @@
+"""ament_python package visual_adaptive_servo (also pip-installable without ROS)."""
+
+from glob import glob
+
+from setuptools import setup
+
+package_name = "visual_adaptive_servo"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=[package_name, "sim_bridge"],
+    package_data={"sim_bridge": ["urdf/*.urdf"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/urdf", glob("sim_bridge/urdf/*.urdf")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "setuptools",
+        "numpy>=1.26",
+        "pybullet>=3.2.5",
+        "PyYAML>=6.0",
+        "matplotlib>=3.6",
+        "rosbags>=0.10.4",
+    ],
+    extras_require={"test": ["pytest>=7", "ruff>=0.5"]},
+    zip_safe=True,
+    maintainer="visual_adaptive_servo maintainers",
+    maintainer_email="maintainers@users.noreply.h-seed-00a3853d.example",
+    description="Adaptive visual tracking with an uncalibrated fixed camera, without "
+                "image-space velocity (H. Wang, Automatica 2015), with a PyBullet simulator.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "vas = visual_adaptive_servo.cli:main",
+            "controller_node = visual_adaptive_servo.controller_node:main",
+            "sim_node = sim_bridge.sim_node:main",
+        ],
+    },
+)

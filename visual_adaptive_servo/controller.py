@@ -1,0 +1,455 @@
+"""H. Wang's observer-based adaptive visual tracking controller (Automatica 2015).
+
+Two layers:
+
+* :func:`control_law` is the paper's section 3 as one pure function of the
+  controller state and the measurements: observer (10), reference velocity and
+  acceleration (18)/(19), sliding vector (20), torque (22) and the adaptation
+  rates (23)-(25).  It has no memory, so tests can integrate it with any ODE
+  scheme and compare against the Lyapunov functions of the proof.
+* :class:`AdaptiveVisualTracker` is the sampled controller a robot runs:
+  ``step(t, q, qd, x)`` integrates the state over the elapsed time, evaluates
+  the law, projects the adaptation (Remark 6), saturates the torque, rejects bad
+  samples without touching its state, and falls back safely when input is
+  missing or stale.  It never measures image-space velocity.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .config import ControllerConfig, check_alpha_gamma
+from .trajectory import BlendedStart, SinusoidTrajectory
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Gains of eqs (10), (18), (22)-(25); matrices are diagonal, stored as vectors."""
+
+    K: np.ndarray
+    alpha: float
+    gamma: float
+    Gamma_d: np.ndarray
+    Gamma_z_perp: np.ndarray
+    Gamma_z: np.ndarray
+
+    def __post_init__(self):
+        check_alpha_gamma(self.alpha, self.gamma)
+
+
+@dataclass(frozen=True)
+class EstimatorState:
+    """What the controller remembers: x_o (2m,), a_z_perp_hat, a_z_hat, a_d_hat."""
+
+    x_obs: np.ndarray
+    a_z_perp: np.ndarray
+    a_z: np.ndarray
+    a_d: np.ndarray
+
+    def advanced(self, rates, dt):
+        """Forward-Euler step of every state by ``dt`` with ``rates`` (an EstimatorState)."""
+        return EstimatorState(self.x_obs + dt * rates.x_obs, self.a_z_perp + dt * rates.a_z_perp,
+                              self.a_z + dt * rates.a_z, self.a_d + dt * rates.a_d)
+
+    def is_finite(self):
+        return all(np.all(np.isfinite(v)) for v in
+                   (self.x_obs, self.a_z_perp, self.a_z, self.a_d))
+
+
+@dataclass(frozen=True)
+class LawOutput:
+    """Everything :func:`control_law` computes at one instant."""
+
+    tau: np.ndarray          # (n,) eq (22)
+    rates: EstimatorState    # x_o_dot (10), a_d_dot (23), a_z_perp_dot (24), a_z_dot (25)
+    s: np.ndarray            # (n,) eq (20)
+    qr_dot: np.ndarray       # (n,) eq (18)
+    qr_ddot: np.ndarray      # (n,) eq (19)
+    J_star: np.ndarray       # (2m, n)
+    z_hat: np.ndarray        # (m,)
+    sigma_min: float         # smallest singular value of J_star
+    damped: bool             # the pseudo-inverse was damped
+    projection_active: bool  # a projection changed an adaptation rate
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Bounds of Remark 6: boxes on the estimates and a minimum estimated depth.
+
+    The projection removes, from the unconstrained adaptation rate, the parts
+    that would leave the set {lo <= a <= hi, z_hat_i(q) >= min_depth}; inside
+    the set the rate is unchanged.  :meth:`clamp` returns a state that is back
+    in the set after a finite Euler step.
+    """
+
+    a_z_perp_min: np.ndarray
+    a_z_perp_max: np.ndarray
+    a_z_min: np.ndarray
+    a_z_max: np.ndarray
+    a_d_min: np.ndarray
+    a_d_max: np.ndarray
+    min_depth: float
+
+    @staticmethod
+    def _box(a, rate, lo, hi):
+        blocked = ((a <= lo) & (rate < 0.0)) | ((a >= hi) & (rate > 0.0))
+        return np.where(blocked, 0.0, rate), bool(blocked.any())
+
+    def dynamic_rate(self, a_d, a_d_dot):
+        """Project the dynamic adaptation rate of eq (23) onto the a_d box."""
+        return self._box(a_d, a_d_dot, self.a_d_min, self.a_d_max)
+
+    def kinematic_rates(self, state, a_perp_dot, a_z_dot, H, Gamma_z):
+        """Project the rates of eqs (24) and (25); returns (a_perp_dot, a_z_dot, active)."""
+        rate_z = a_z_dot
+        a_perp_dot, act1 = self._box(state.a_z_perp, a_perp_dot, self.a_z_perp_min,
+                                     self.a_z_perp_max)
+        a_z_dot, act3 = self._box(state.a_z, rate_z, self.a_z_min, self.a_z_max)
+        # depth half-spaces h_i . a_z >= min_depth: remove the Gamma-weighted normal
+        # component of the rate that points out of an active half-space
+        act4 = False
+        free = ~(((state.a_z <= self.a_z_min) & (rate_z < 0.0))
+                 | ((state.a_z >= self.a_z_max) & (rate_z > 0.0)))
+        for h in H:
+            if h @ state.a_z <= self.min_depth and h @ a_z_dot < 0.0:
+                g = Gamma_z * h * free
+                denom = h @ g
+                if denom > 0.0:
+                    a_z_dot = a_z_dot - g * (h @ a_z_dot) / denom
+                    act4 = True
+        return a_perp_dot, a_z_dot, act1 or act3 or act4
+
+    def clamp(self, state, H):
+        """Return ``state`` with its estimates put back into the set after a finite step."""
+        a_z = np.clip(state.a_z, self.a_z_min, self.a_z_max)
+        for h in H:
+            deficit = self.min_depth - h @ a_z
+            if deficit > 0.0:
+                # the depth-offset-like parameters move least in the weighted sense
+                a_z = a_z + h * deficit / (h @ h)
+        return replace(state, a_z_perp=np.clip(state.a_z_perp, self.a_z_perp_min,
+                                               self.a_z_perp_max),
+                       a_z=a_z, a_d=np.clip(state.a_d, self.a_d_min, self.a_d_max))
+
+
+def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=None,
+                min_singular_value=0.0):
+    """Evaluate the paper's controller at one instant.
+
+    Parameters
+    ----------
+    model : RobotCameraModel
+        Structure only; its true parameters are never read here.
+    gains : Gains
+    state : EstimatorState
+    q, qd : (n,) joint positions [rad] and velocities [rad/s]
+    x : (2m,) measured feature pixels
+    xd, xd_dot, xd_ddot : (2m,) desired pixels and their derivatives
+    projection : Projection or None
+        Applied to the adaptation rates before they enter the total derivatives
+        of eq (19), so q_ddot_r stays the exact derivative of q_dot_r.
+    min_singular_value : float
+        Below this smallest singular value of J*, use a damped pseudo-inverse.
+
+    Returns
+    -------
+    LawOutput
+    """
+    m2 = x.shape[0]
+    H, dH, dH_rate, W, W_rate = model.kinematic_tensors(q, qd)
+    H_rate = qd @ dH                                  # (m, p_z)
+    z_hat = H @ state.a_z                             # (m,)
+    z_rate_hat = H_rate @ state.a_z                   # model rate, hat{Z_dot}
+    Zh = np.repeat(z_hat, 2)
+    Zh_rate = np.repeat(z_rate_hat, 2)
+
+    x_obs = state.x_obs
+    e_obs = x_obs - xd                                # x_o - x_d
+    dx_obs = x_obs - x                                # Delta x_o
+    dx = x - xd                                       # Delta x
+    J_hat = model.image_jacobian(W, dH, x, state.a_z_perp, state.a_z)
+    Jq = J_hat @ qd
+    # eq (10): the observer
+    x_obs_dot = (Jq - 0.5 * Zh_rate * e_obs) / Zh - gains.alpha * dx_obs
+    x_r_dot = xd_dot - gains.gamma * e_obs
+    x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
+
+    # eq (24)
+    Y_perp = model.Y_z_perp(W, qd)
+    a_perp_dot = gains.Gamma_z_perp * (Y_perp.T @ (dx - dx_obs))
+    # eq (25) with Y_z* and Y_z** of the paper
+    Y_star = (model.Y_z(H, Jq / Zh) + model.Y_z_bar(H_rate, x + 0.5 * e_obs)
+              - 0.5 * model.Y_z(H, Zh_rate * e_obs / Zh))
+    Y_2star = 0.5 * model.Y_z_bar(H_rate, x_obs + xd) + model.Y_z(H, x_r_dot)
+    a_z_dot = -gains.Gamma_z * (Y_2star.T @ dx - Y_star.T @ dx_obs)
+
+    projection_active = False
+    if projection is not None:
+        a_perp_dot, a_z_dot, projection_active = projection.kinematic_rates(
+            state, a_perp_dot, a_z_dot, H, gains.Gamma_z)
+
+    # eq (18): J* = J_hat(q, (x_o + x_d)/2) and its TOTAL time derivative
+    u = 0.5 * (x_obs + xd)
+    u_dot = 0.5 * (x_obs_dot + xd_dot)
+    J_star = model.image_jacobian(W, dH, u, state.a_z_perp, state.a_z)
+    J_z_hat = np.repeat(dH @ state.a_z, 2, axis=0)
+    J_z_hat_dot = np.repeat(dH_rate @ state.a_z + dH @ a_z_dot, 2, axis=0)
+    J_star_dot = (W_rate @ state.a_z_perp + W @ a_perp_dot
+                  - u_dot[:, None] * J_z_hat - u[:, None] * J_z_hat_dot)
+    Zh_dot_total = np.repeat(H_rate @ state.a_z + H @ a_z_dot, 2)
+
+    G = J_star @ J_star.T
+    eig_min = np.linalg.eigvalsh(G)[0] if m2 > 2 else _eigmin_2x2(G)
+    sigma_min = float(np.sqrt(max(eig_min, 0.0)))
+    damped = sigma_min < min_singular_value
+    if damped:
+        # damped least squares (Nakamura): the damping grows as sigma_min -> 0
+        lam2 = min_singular_value**2 - sigma_min**2
+        G = G + lam2 * np.eye(m2)
+    G_inv = np.linalg.inv(G)
+
+    w = Zh * x_r_dot
+    y = G_inv @ w
+    qr_dot = J_star.T @ y                             # eq (18)
+    # eq (19), with J*^{+T} qr_dot = (J* J*^T)^{-1} Zh x_r_dot = y
+    v = J_star_dot.T @ y
+    b = Zh * x_r_ddot + Zh_dot_total * x_r_dot - J_star_dot @ qr_dot
+    qr_ddot = v + J_star.T @ (G_inv @ (b - J_star @ v))
+
+    s = qd - qr_dot                                   # eq (20)
+    Y_d = model.dynamic_regressor(q, qd, qr_dot, qr_ddot)
+    Js = J_star @ s
+    tau = -J_star.T @ (gains.K * Js) + Y_d @ state.a_d  # eq (22)
+    a_d_dot = -gains.Gamma_d * (Y_d.T @ s)            # eq (23)
+    if projection is not None:
+        a_d_dot, active_d = projection.dynamic_rate(state.a_d, a_d_dot)
+        projection_active = projection_active or active_d
+    rates = EstimatorState(x_obs_dot, a_perp_dot, a_z_dot, a_d_dot)
+    return LawOutput(tau, rates, s, qr_dot, qr_ddot, J_star, z_hat, sigma_min, damped,
+                     projection_active)
+
+
+def _eigmin_2x2(G):
+    a, b, d = G[0, 0], G[0, 1], G[1, 1]
+    half_tr = 0.5 * (a + d)
+    return half_tr - np.sqrt(max(0.25 * (a - d) ** 2 + b * b, 0.0))
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One sample of the sampled controller (what the node publishes)."""
+
+    t: float
+    tau: np.ndarray             # command sent (after saturation / fallback)
+    x_d: np.ndarray
+    x_obs: np.ndarray
+    error: np.ndarray           # x - x_d (NaN when x was rejected)
+    z_hat: np.ndarray
+    state: EstimatorState
+    status: str                 # "ok", "hold", "fallback"
+    problems: tuple = ()        # human-readable reasons a sample was rejected
+    saturated: bool = False
+    projection_active: bool = False
+    damped: bool = False
+    sigma_min: float = float("nan")
+    tau_unsaturated: np.ndarray | None = None
+    flags: dict = field(default_factory=dict)
+
+
+class InputError(ValueError):
+    """A measurement was refused; the message names the input and the problem."""
+
+
+def validate_vector(name, value, size):
+    """Return ``value`` as a finite float64 vector of ``size`` or raise InputError."""
+    if value is None:
+        raise InputError(f"{name}: missing")
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (size,):
+        raise InputError(f"{name}: expected {size} values, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}: contains NaN or inf: {arr.tolist()}")
+    return arr
+
+
+class AdaptiveVisualTracker:
+    """The sampled controller: ``step(t, q, qd, x)`` -> :class:`StepResult`.
+
+    Integration: the state (x_o and the estimates) is advanced by forward Euler
+    over the time since the last accepted sample, using the rates computed there;
+    the interval is clamped to ``max_dt`` so a long gap cannot make one huge step.
+
+    Start: x_o(0) = x(0); x_d is blended in from x(0) over ``start_blend_time``
+    (0 keeps the paper's start on the trajectory).
+
+    Bad input (missing, NaN/inf, wrong size, outside the image, time going
+    backwards) rejects the sample: nothing is committed; the last valid command
+    is held for ``safety.hold_time``, then the fallback applies
+    (``gravity_compensation``: tau = g_hat(q) - D q_dot with the current
+    estimate a_d_hat, or ``zero_torque``; with an invalid joint state, zero
+    torque).  When the camera has been stale for ``safety.camera_timeout`` and
+    comes back, the observer restarts at the measured x and x_d is blended in
+    again from there, so recovery has no jump.
+    """
+
+    def __init__(self, config: ControllerConfig):
+        self.config = config
+        self.model = config.model
+        self.trajectory = SinusoidTrajectory(config["trajectory.offset"],
+                                             config["trajectory.a_cos"],
+                                             config["trajectory.a_sin"],
+                                             config["trajectory.omega"])
+        self.gains = Gains(config.K, config.alpha, config.gamma, config.Gamma_d,
+                           config.Gamma_z_perp, config.Gamma_z)
+        self.projection = (Projection(config["projection.a_z_perp_min"],
+                                      config["projection.a_z_perp_max"],
+                                      config["projection.a_z_min"], config["projection.a_z_max"],
+                                      config["projection.a_d_min"], config["projection.a_d_max"],
+                                      config["projection.min_depth"])
+                           if config["projection.enabled"] else None)
+        self.reset()
+
+    def reset(self):
+        """Forget everything: the next valid sample starts the controller."""
+        c = self.config
+        self.state = EstimatorState(np.zeros(2 * self.model.m), np.array(c.a_z_perp_init),
+                                    np.array(c.a_z_init), np.array(c.a_d_init))
+        self.rates = None
+        self.desired = None
+        self.t_last = None          # time of the last accepted sample
+        self.t_last_feature = None  # time of the last valid feature
+        self.last_tau = np.zeros(self.model.n)
+        self.t_last_tau = None
+        self.stale = False
+
+    def update_gains(self, **changes):
+        """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
+        params = dict(self.config.params)
+        params.update(changes)
+        new_config = ControllerConfig.from_params(params)
+        self.config = new_config
+        self.gains = Gains(new_config.K, new_config.alpha, new_config.gamma, new_config.Gamma_d,
+                           new_config.Gamma_z_perp, new_config.Gamma_z)
+
+    def desired_at(self, t):
+        if self.desired is None:
+            return self.trajectory(t)
+        return self.desired(t)
+
+    # -- the sample -------------------------------------------------------------
+    def _check_feature(self, x):
+        x = validate_vector("feature x", x, 2 * self.model.m)
+        u0, u1, v0, v1 = self.config.image_bounds
+        u, v = x[0::2], x[1::2]
+        outside = (u < u0) | (u > u1) | (v < v0) | (v > v1)
+        if outside.any():
+            raise InputError(f"feature x: point(s) {np.flatnonzero(outside).tolist()} outside the "
+                             f"image bounds {list(self.config.image_bounds)}: {x.tolist()}")
+        return x
+
+    def step(self, t, q, qd, x):
+        """Process one sample; never raises on bad measurements (see class doc)."""
+        n = self.model.n
+        problems = []
+        try:
+            t = float(t)
+            if not np.isfinite(t):
+                raise InputError("time: not finite")
+            if self.t_last is not None and t <= self.t_last:
+                raise InputError(f"time: {t} is not after the last sample {self.t_last}")
+        except (InputError, TypeError, ValueError) as exc:
+            return self._reject(self.t_last or 0.0, None, None, [str(exc)])
+        try:
+            q = validate_vector("joint positions q", q, n)
+            qd = validate_vector("joint velocities qd", qd, n)
+        except InputError as exc:
+            return self._reject(t, None, None, [str(exc)])
+        try:
+            x = self._check_feature(x)
+        except InputError as exc:
+            problems.append(str(exc))
+            if (self.t_last_feature is None
+                    or t - self.t_last_feature >= self.config["safety.camera_timeout"]):
+                if not self.stale and self.t_last_feature is not None:
+                    log.warning("camera stale: no valid feature for %.3f s",
+                                t - self.t_last_feature)
+                self.stale = self.t_last_feature is not None
+            return self._reject(t, q, qd, problems)
+
+        restarting = self.t_last is None or self.stale
+        if restarting:
+            state = replace(self.state, x_obs=x.copy())
+            self.desired = BlendedStart(self.trajectory, x.copy(), t,
+                                        self.config.start_blend_time)
+        else:
+            dt = min(t - self.t_last, self.config.max_dt)
+            state = self.state.advanced(self.rates, dt)
+        H = None
+        if self.projection is not None:
+            H = self.model.kinematic_tensors(q, qd)[0]
+            state = self.projection.clamp(state, H)
+
+        xd, xd_dot, xd_ddot = self.desired(t)
+        out = control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                          self.projection, self.config.min_singular_value)
+        if not (np.all(np.isfinite(out.tau)) and out.rates.is_finite() and state.is_finite()):
+            return self._reject(t, q, qd, ["controller update is not finite (state kept)"])
+
+        limit = self.config.torque_limit
+        tau = np.clip(out.tau, -limit, limit)
+        saturated = bool(np.any(tau != out.tau))
+        # commit
+        if restarting and self.stale:
+            log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
+        self.state, self.rates, self.t_last, self.t_last_feature = state, out.rates, t, t
+        self.stale = False
+        self.last_tau, self.t_last_tau = tau, t
+        return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
+                          saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
+
+    def _reject(self, t, q, qd, problems):
+        for p in problems:
+            log.warning("sample at t=%.4f rejected: %s", t, p)
+        safety = self.config
+        xd = self.desired_at(t)[0] if self.t_last is not None else np.full(2 * self.model.m,
+                                                                              np.nan)
+        if self.t_last_tau is not None and t - self.t_last_tau <= safety["safety.hold_time"]:
+            tau, status = self.last_tau, "hold"
+        else:
+            tau, status = self.fallback_torque(q, qd), "fallback"
+        z_hat = (self.model.depth(q, self.state.a_z) if q is not None
+                 else np.full(self.model.m, np.nan))
+        return StepResult(t, tau, xd, self.state.x_obs, np.full(2 * self.model.m, np.nan), z_hat,
+                          self.state, status, tuple(problems))
+
+    def fallback_torque(self, q, qd):
+        """Safe torque when no valid control can be computed."""
+        n = self.model.n
+        if q is None or qd is None or self.config["safety.fallback"] == "zero_torque":
+            return np.zeros(n)
+        zero = np.zeros(n)
+        g_hat = self.model.dynamic_regressor(q, zero, zero, zero) @ self.state.a_d
+        tau = g_hat - self.config["safety.fallback_damping"] * qd
+        return np.clip(tau, -self.config.torque_limit, self.config.torque_limit)
+
+
+def health(result):
+    """(level, message, values) of a :class:`StepResult` for /diagnostics."""
+    values = {"status": result.status, "saturated": result.saturated,
+              "projection_active": result.projection_active, "damped_pinv": result.damped,
+              "sigma_min_J_star": f"{result.sigma_min:.6g}"}
+    if result.status == "fallback":
+        return "ERROR", "input bad or stale, fallback torque: " + "; ".join(result.problems), values
+    if result.status == "hold":
+        return "WARN", "sample rejected, holding last command: " + "; ".join(result.problems), values
+    notes = [name for name, on in (("torque saturated", result.saturated),
+                                   ("projection active", result.projection_active),
+                                   ("J* near singular, damped", result.damped)) if on]
+    if notes:
+        return "WARN", ", ".join(notes), values
+    return "OK", "tracking", values

@@ -1,0 +1,173 @@
+"""Arrays <-> ROS 2 messages, for rclpy and for the ``rosbags`` type store alike.
+
+The conversion functions take a *message set* that supplies the message
+classes and the two places where rclpy and rosbags differ (how a float
+sequence and a ``byte`` are represented).  The nodes pass :func:`rclpy_messages`;
+the MCAP recorder and the tests pass :func:`rosbags_messages` (the Jazzy
+definitions), so what ``vas run`` records is built by the same code the nodes
+publish with.
+
+Topic content (see DESIGN.md section 2):
+
+* ``/camera/features``: PolygonStamped, one Point32 per feature (x=u px, y=v px, z=0)
+* ``/joint_states``: JointState with position, velocity and the applied effort
+* Float64MultiArray: one dimension whose label lists the entries, comma-separated
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+MESSAGE_TYPES = {
+    "Time": "builtin_interfaces/msg/Time",
+    "Header": "std_msgs/msg/Header",
+    "JointState": "sensor_msgs/msg/JointState",
+    "Image": "sensor_msgs/msg/Image",
+    "Point32": "geometry_msgs/msg/Point32",
+    "Polygon": "geometry_msgs/msg/Polygon",
+    "PolygonStamped": "geometry_msgs/msg/PolygonStamped",
+    "MultiArrayDimension": "std_msgs/msg/MultiArrayDimension",
+    "MultiArrayLayout": "std_msgs/msg/MultiArrayLayout",
+    "Float64MultiArray": "std_msgs/msg/Float64MultiArray",
+    "Clock": "rosgraph_msgs/msg/Clock",
+    "KeyValue": "diagnostic_msgs/msg/KeyValue",
+    "DiagnosticStatus": "diagnostic_msgs/msg/DiagnosticStatus",
+    "DiagnosticArray": "diagnostic_msgs/msg/DiagnosticArray",
+}
+
+DIAGNOSTIC_LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
+
+
+@dataclass(frozen=True)
+class MessageSet:
+    """Message classes by short name plus the representation adapters."""
+
+    classes: dict
+    floats: Callable[[Any], Any]     # float64 vector -> sequence field value
+    uint8s: Callable[[Any], Any]     # uint8 vector -> sequence field value
+    byte: Callable[[int], Any]       # int -> 'byte' field value
+    typestore: Any = None            # the rosbags type store (serialisation), if any
+
+    def __getattr__(self, name):
+        try:
+            return self.__dict__["classes"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+def rosbags_messages():
+    """The ROS 2 Jazzy definitions of the rosbags type store (no ROS needed)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    classes = {short: store.types[full] for short, full in MESSAGE_TYPES.items()}
+    return MessageSet(classes, lambda v: np.asarray(v, dtype=np.float64).copy(),
+                      lambda v: np.asarray(v, dtype=np.uint8).reshape(-1).copy(), int, store)
+
+
+def rclpy_messages():
+    """The installed ROS 2 Python message classes (needs a sourced ROS 2)."""
+    classes = {}
+    for short, full in MESSAGE_TYPES.items():
+        package, _, name = full.split("/")
+        classes[short] = getattr(importlib.import_module(f"{package}.msg"), name)
+    return MessageSet(classes, lambda v: [float(e) for e in np.asarray(v).reshape(-1)],
+                      lambda v: np.asarray(v, dtype=np.uint8).reshape(-1).tobytes(),
+                      lambda i: bytes([i]))
+
+
+def time_to_stamp(msgs, t):
+    """Seconds (float) -> builtin_interfaces/Time, rounded to the nanosecond."""
+    ns = int(round(t * 1e9))
+    if ns < 0:
+        raise ValueError(f"stamp: negative time {t}")
+    return msgs.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def stamp_to_time(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def header(msgs, t, frame_id=""):
+    return msgs.Header(stamp=time_to_stamp(msgs, t), frame_id=frame_id)
+
+
+def joint_state_to_msg(msgs, t, names, q, qd, effort):
+    """JointState stamped t with position q, velocity qd and effort (all (n,))."""
+    return msgs.JointState(header=header(msgs, t), name=list(names), position=msgs.floats(q),
+                           velocity=msgs.floats(qd), effort=msgs.floats(effort))
+
+
+def joint_state_from_msg(msg, names):
+    """(t, q, qd) from a JointState, reordered to ``names``.
+
+    Raises ValueError naming the problem when a joint is missing or the sizes
+    do not match; values are not checked for NaN here (the controller does).
+    """
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise ValueError(f"joint state: missing joint(s) {missing}; got {list(msg.name)}")
+    position, velocity = np.asarray(msg.position, float), np.asarray(msg.velocity, float)
+    if len(position) != len(msg.name) or len(velocity) != len(msg.name):
+        raise ValueError(f"joint state: {len(msg.name)} names but {len(position)} positions "
+                         f"and {len(velocity)} velocities")
+    order = [index[name] for name in names]
+    return stamp_to_time(msg.header.stamp), position[order], velocity[order]
+
+
+def features_to_msg(msgs, t, pixels, frame_id="camera"):
+    """PolygonStamped with one Point32 (u, v, 0) per feature; ``pixels`` is (2m,)."""
+    uv = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    points = [msgs.Point32(x=float(u), y=float(v), z=0.0) for u, v in uv]
+    return msgs.PolygonStamped(header=header(msgs, t, frame_id),
+                               polygon=msgs.Polygon(points=points))
+
+
+def features_from_msg(msg):
+    """(t, pixels (2m,)) from a PolygonStamped."""
+    pixels = np.array([[p.x, p.y] for p in msg.polygon.points], dtype=float).reshape(-1)
+    return stamp_to_time(msg.header.stamp), pixels
+
+
+def float_array_to_msg(msgs, values, labels=None):
+    """Float64MultiArray of a vector; ``labels`` (one per entry) go in the dimension label."""
+    values = np.asarray(values, dtype=float).reshape(-1)
+    label = ",".join(labels) if labels is not None else ""
+    if labels is not None and len(labels) != len(values):
+        raise ValueError(f"float array: {len(labels)} labels for {len(values)} values")
+    dim = msgs.MultiArrayDimension(label=label, size=len(values), stride=len(values))
+    return msgs.Float64MultiArray(layout=msgs.MultiArrayLayout(dim=[dim], data_offset=0),
+                                  data=msgs.floats(values))
+
+
+def float_array_from_msg(msg):
+    """(values, labels or None) of a Float64MultiArray written by :func:`float_array_to_msg`."""
+    values = np.asarray(msg.data, dtype=float)
+    labels = None
+    if msg.layout.dim and msg.layout.dim[0].label:
+        labels = msg.layout.dim[0].label.split(",")
+    return values, labels
+
+
+def clock_to_msg(msgs, t):
+    return msgs.Clock(clock=time_to_stamp(msgs, t))
+
+
+def diagnostics_to_msg(msgs, t, name, level, message, values=None, hardware_id="sim"):
+    """DiagnosticArray with one status; ``level`` is OK/WARN/ERROR/STALE."""
+    pairs = [msgs.KeyValue(key=str(k), value=str(v)) for k, v in (values or {}).items()]
+    status = msgs.DiagnosticStatus(level=msgs.byte(DIAGNOSTIC_LEVELS[level]), name=name,
+                                   message=message, hardware_id=hardware_id, values=pairs)
+    return msgs.DiagnosticArray(header=header(msgs, t), status=[status])
+
+
+def image_to_msg(msgs, t, rgb, frame_id="camera"):
+    """sensor_msgs/Image (rgb8) of an (h, w, 3) uint8 array."""
+    h, w, _ = rgb.shape
+    return msgs.Image(header=header(msgs, t, frame_id), height=h, width=w, encoding="rgb8",
+                      is_bigendian=0, step=3 * w, data=msgs.uint8s(rgb))

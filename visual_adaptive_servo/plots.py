@@ -1,0 +1,79 @@
+"""PNG plots of a run, in the style of the paper's figures (matplotlib, no display)."""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (backend first)
+import numpy as np  # noqa: E402
+
+
+def _save(fig, path):
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_run(series, out_dir, labels):
+    """Write the standard plots of one run; returns the list of PNG paths.
+
+    ``series`` maps names to arrays over time: t (N,), x, x_d, x_obs (N, 2m),
+    z, z_hat (N, m), tau (N, n), a_z_perp, a_z, a_d (N, p).
+    ``labels`` maps a_z_perp / a_z / a_d to their entry names.
+    """
+    t = series["t"]
+    paths = []
+    err = series["x"] - series["x_d"]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i in range(err.shape[1]):
+        ax.plot(t, err[:, i], label=f"{'uv'[i % 2]}{i // 2 + 1} - {'uv'[i % 2]}d{i // 2 + 1}")
+    ax.set(xlabel="time [s]", ylabel="image error [px]",
+           title="Image-space tracking error x - x_d (paper Fig. 2)")
+    ax.grid(True)
+    ax.legend()
+    paths.append(_save(fig, os.path.join(out_dir, "tracking_error.png")))
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i in range(series["z"].shape[1]):
+        ax.plot(t, series["z"][:, i], label=f"z{i + 1} actual")
+        ax.plot(t, series["z_hat"][:, i], "--", label=f"z{i + 1} estimated")
+    ax.set(xlabel="time [s]", ylabel="depth [m]", title="Actual and estimated depth (paper Fig. 3)")
+    ax.grid(True)
+    ax.legend()
+    paths.append(_save(fig, os.path.join(out_dir, "depth.png")))
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i in range(series["tau"].shape[1]):
+        ax.plot(t, series["tau"][:, i], label=f"tau{i + 1}")
+    ax.set(xlabel="time [s]", ylabel="torque [N m]", title="Joint torques")
+    ax.grid(True)
+    ax.legend()
+    paths.append(_save(fig, os.path.join(out_dir, "torques.png")))
+
+    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    for ax, key, title in zip(axes, ("a_z_perp", "a_z", "a_d"),
+                              ("a_z_perp (eq 24)", "a_z (eq 25)", "a_d (eq 23)")):
+        for i, name in enumerate(labels[key]):
+            ax.plot(t, series[key][:, i], label=name)
+        ax.set(ylabel="estimate", title=title)
+        ax.grid(True)
+        ax.legend(fontsize=7, ncol=4)
+    axes[-1].set_xlabel("time [s]")
+    paths.append(_save(fig, os.path.join(out_dir, "parameters.png")))
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    for i in range(series["x"].shape[1] // 2):
+        ax.plot(series["x_d"][:, 2 * i], series["x_d"][:, 2 * i + 1], "k--", lw=1, label="x_d")
+        ax.plot(series["x_obs"][:, 2 * i], series["x_obs"][:, 2 * i + 1], lw=1, label="x_o")
+        ax.plot(series["x"][:, 2 * i], series["x"][:, 2 * i + 1], lw=1, label="x")
+        ax.plot(series["x"][0, 2 * i], series["x"][0, 2 * i + 1], "go", label="start")
+    ax.set(xlabel="u [px]", ylabel="v [px]", title="Image-plane path")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True)
+    ax.legend()
+    paths.append(_save(fig, os.path.join(out_dir, "image_path.png")))
+    return paths

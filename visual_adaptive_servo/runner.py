@@ -1,0 +1,246 @@
+"""The closed loop in one process: simulator + controller, recorded and plotted.
+
+``run_scenario`` is what ``vas run`` calls.  It is deterministic for a given
+configuration and seed, stops early (and says why) on divergence, and always
+writes its outputs -- summary.json, timeseries.csv, the PNG plots and a closed
+MCAP file -- also after Ctrl-C or an exception.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from sim_bridge.simulator import Simulator
+
+from . import messages as m
+from .controller import AdaptiveVisualTracker, health
+from .plots import plot_run
+from .recording import CONTROLLER_NS, SIM_NS, McapRecorder, write_csv, write_json
+
+log = logging.getLogger(__name__)
+
+RMS_WINDOW_S = 5.0
+
+
+class Progress:
+    """A one-line progress bar on a terminal (silent when not a TTY)."""
+
+    def __init__(self, total, enabled=None, stream=sys.stderr, width=30):
+        self.total, self.stream, self.width = total, stream, width
+        self.enabled = stream.isatty() if enabled is None else enabled
+        self.last = -1
+
+    def update(self, done, note=""):
+        if not self.enabled:
+            return
+        pct = int(100 * done / max(self.total, 1))
+        if pct == self.last and done < self.total:
+            return
+        self.last = pct
+        filled = int(self.width * done / max(self.total, 1))
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {pct:3d}% {note}")
+        self.stream.flush()
+
+    def close(self):
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+class Series:
+    """Preallocated time series of one run."""
+
+    def __init__(self, steps, model):
+        n, m2, m = model.n, 2 * model.m, model.m
+        shapes = {"t": (), "x": (m2,), "x_d": (m2,), "x_obs": (m2,), "z": (m,), "z_hat": (m,),
+                  "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
+                  "a_z": (model.p_z,), "a_d": (model.p_d,)}
+        self.data = {k: np.full((steps,) + s, np.nan) for k, s in shapes.items()}
+        self.status = []
+        self.count = 0
+
+    def add(self, **values):
+        k = self.count
+        for key, value in values.items():
+            self.data[key][k] = value
+        self.count += 1
+
+    def view(self):
+        return {k: v[:self.count] for k, v in self.data.items()}
+
+
+def _record_step(rec, msgs, names, labels, meas, res, tau_cmd, diag_due):
+    t = meas.t
+    rec.write("/clock", t, m.clock_to_msg(msgs, t))
+    rec.write("/joint_states", t, m.joint_state_to_msg(msgs, t, names, meas.q, meas.qd,
+                                                       meas.tau_applied))
+    if meas.pixels is not None and np.all(np.isfinite(meas.pixels)):
+        rec.write("/camera/features", t, m.features_to_msg(msgs, meas.feature_stamp, meas.pixels))
+    rec.write(f"{SIM_NS}/true_depth", t, m.float_array_to_msg(msgs, meas.true_depth))
+    rec.write("/effort_controller/commands", t, m.float_array_to_msg(msgs, tau_cmd))
+    if np.all(np.isfinite(res.x_d)):
+        rec.write(f"{CONTROLLER_NS}/desired", t, m.features_to_msg(msgs, t, res.x_d))
+    rec.write(f"{CONTROLLER_NS}/observed", t, m.features_to_msg(msgs, t, res.x_obs))
+    if np.all(np.isfinite(res.error)):
+        rec.write(f"{CONTROLLER_NS}/tracking_error", t, m.features_to_msg(msgs, t, res.error))
+    rec.write(f"{CONTROLLER_NS}/estimated_depth", t, m.float_array_to_msg(msgs, res.z_hat))
+    st = res.state
+    rec.write(f"{CONTROLLER_NS}/parameters", t, m.float_array_to_msg(
+        msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels))
+    if diag_due:
+        level, message, values = health(res)
+        rec.write("/diagnostics", t, m.diagnostics_to_msg(msgs, t, "controller_node", level,
+                                                          message, values, "controller"))
+
+
+def parameter_labels(model):
+    return ([f"a_z_perp.{s}" for s in model.a_z_perp_labels]
+            + [f"a_z.{s}" for s in model.a_z_labels] + [f"a_d.{s}" for s in model.a_d_labels])
+
+
+def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, plots=True,
+                 faults=None):
+    """Run the closed loop and write every output into ``out_dir``; return the summary.
+
+    Parameters
+    ----------
+    scenario : config.Scenario
+    out_dir : str
+        Created if needed.
+    duration : float, optional
+        Simulated seconds; default ``sim_node.duration`` (30 s if that is 0).
+    progress : bool, optional
+        Progress bar; default: when stderr is a terminal.
+    record, plots : bool
+        Write run.mcap / the PNGs (benchmarks switch them off).
+    faults : callable, optional
+        ``faults(step, measurement) -> measurement`` to inject bad input (tests).
+    """
+    os.makedirs(out_dir, exist_ok=True)
+    duration = duration or scenario.sim.duration or 30.0
+    period = scenario.sim.control_period
+    steps = int(round(duration / period))
+    model = scenario.controller.model
+    sim = Simulator(scenario.sim)
+    ctl = AdaptiveVisualTracker(scenario.controller)
+    series = Series(steps, model)
+    labels = parameter_labels(model)
+    counters = {"rejected": 0, "fallback": 0, "saturated": 0, "projection_active": 0,
+                "damped": 0, "sim_refused_commands": 0}
+    diverged, reason, interrupted, error = False, "", False, None
+    recorder = McapRecorder(os.path.join(out_dir, "run.mcap")) if record else None
+    msgs = recorder.msgs if recorder else None
+    bar = Progress(steps, progress)
+    limit = scenario.controller["divergence_torque"]
+    diag_every = max(1, int(round(1.0 / period)))
+    last_status = None
+    wall0 = time.perf_counter()
+    try:
+        for k in range(steps):
+            meas = sim.measure()
+            if faults is not None:
+                meas = faults(k, meas)
+            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
+            counters["rejected"] += res.status != "ok"
+            counters["fallback"] += res.status == "fallback"
+            counters["saturated"] += res.saturated
+            counters["projection_active"] += res.projection_active
+            counters["damped"] += res.damped
+            x = meas.pixels if meas.pixels is not None else np.nan
+            series.add(t=meas.t, x=x, x_d=res.x_d, x_obs=res.x_obs, z=meas.true_depth,
+                       z_hat=res.z_hat, q=meas.q, qd=meas.qd, tau=res.tau,
+                       a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
+            series.status.append(res.status)
+            if recorder is not None:
+                _record_step(recorder, msgs, scenario.sim.joint_names, labels, meas, res, res.tau,
+                             k % diag_every == 0 or res.status != last_status)
+            last_status = res.status
+            unsat = res.tau_unsaturated if res.tau_unsaturated is not None else res.tau
+            if not (np.all(np.isfinite(meas.q)) and np.all(np.isfinite(meas.qd))):
+                diverged, reason = True, f"joint state not finite at t={meas.t:.3f}"
+            elif np.max(np.abs(unsat)) > limit:
+                diverged, reason = True, (f"|tau| = {np.max(np.abs(unsat)):.3g} N m > "
+                                          f"divergence_torque {limit:g} at t={meas.t:.3f}")
+            elif np.max(np.abs(meas.qd)) > 1e3:
+                diverged, reason = True, f"joint speed above 1e3 rad/s at t={meas.t:.3f}"
+            if diverged:
+                log.error("diverged: %s", reason)
+                break
+            if sim.apply(res.tau) is not None:
+                counters["sim_refused_commands"] += 1
+            bar.update(k + 1, f"t={meas.t + period:6.2f} s")
+    except KeyboardInterrupt:
+        interrupted = True
+        log.warning("interrupted: writing what was simulated so far")
+    except Exception as exc:  # noqa: BLE001 -- outputs must still be written
+        error = f"{type(exc).__name__}: {exc}"
+        log.exception("run failed: writing what was simulated so far")
+    finally:
+        bar.close()
+        wall = time.perf_counter() - wall0
+        sim.close()
+        if recorder is not None:
+            recorder.close()
+    data = series.view()
+    summary = summarize(data, series.status, wall, diverged, reason, counters)
+    summary.update(interrupted=interrupted, error=error, steps=series.count,
+                   duration_requested_s=duration, control_period_s=period,
+                   outputs=["summary.json", "timeseries.csv"])
+    write_outputs(out_dir, data, series.status, model, summary, record, plots)
+    return summary
+
+
+def summarize(data, status, wall, diverged, reason, counters):
+    t = data["t"]
+    if len(t) == 0:
+        return {"diverged": diverged, "divergence_reason": reason, "final_rms_error_px": math.nan,
+                "max_error_px": math.nan, "max_abs_torque": math.nan,
+                "final_depth_error": math.nan, "sim_time_s": 0.0, "wall_time_s": wall,
+                "realtime_factor": 0.0, **counters}
+    err = np.linalg.norm((data["x"] - data["x_d"]).reshape(len(t), -1, 2), axis=2).max(axis=1)
+    window = t >= t[-1] - RMS_WINDOW_S + 1e-9
+    valid = np.isfinite(err)
+    sim_time = float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0))
+    rms = float(np.sqrt(np.mean(err[window & valid] ** 2))) if np.any(window & valid) else math.nan
+    depth_err = data["z_hat"][-1] - data["z"][-1]
+    return {
+        "diverged": diverged,
+        "divergence_reason": reason,
+        "final_rms_error_px": rms,
+        "max_error_px": float(np.nanmax(err)) if valid.any() else math.nan,
+        "max_abs_torque": float(np.nanmax(np.abs(data["tau"]))),
+        "final_depth_error": float(depth_err[0]) if depth_err.size == 1 else depth_err.tolist(),
+        "min_estimated_depth": float(np.nanmin(data["z_hat"])),
+        "sim_time_s": sim_time,
+        "wall_time_s": wall,
+        "realtime_factor": sim_time / wall if wall > 0 else math.inf,
+        **counters,
+    }
+
+
+def write_outputs(out_dir, data, status, model, summary, record, plots):
+    columns, blocks = ["t"], [data["t"][:, None]]
+    for key, names in (("x", None), ("x_d", None), ("x_obs", None), ("z", None),
+                       ("z_hat", None), ("q", None), ("qd", None), ("tau", None),
+                       ("a_z_perp", model.a_z_perp_labels), ("a_z", model.a_z_labels),
+                       ("a_d", model.a_d_labels)):
+        arr = data[key]
+        names = names or [str(i) for i in range(arr.shape[1])]
+        columns += [f"{key}.{name}" for name in names]
+        blocks.append(arr)
+    table = np.hstack(blocks)
+    write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"],
+              ([float(v) for v in row] + [s] for row, s in zip(table, status)))
+    if plots and len(data["t"]) > 1:
+        labels = {"a_z_perp": model.a_z_perp_labels, "a_z": model.a_z_labels,
+                  "a_d": model.a_d_labels}
+        summary["outputs"] += [os.path.basename(p) for p in plot_run(data, out_dir, labels)]
+    if record:
+        summary["outputs"].append("run.mcap")
+    write_json(os.path.join(out_dir, "summary.json"), summary)
