@@ -1,0 +1,81 @@
+"""The rendered camera view agrees with the feature camera's pinhole projection.
+
+Oracle: PyBullet's own segmentation mask of the same view.  The midpoint of
+link 3 and the tip, projected by :class:`PinholeCamera` and mapped by
+:func:`render.image_coordinates`, must fall on pixels of the arm.
+"""
+
+import numpy as np
+import pybullet
+import pytest
+
+from sim_bridge import render
+from sim_bridge.plant import ArmPlant, PinholeCamera, shipped_urdf
+
+BOUNDS = (-320.0, 320.0, -240.0, 240.0)
+WIDTH, HEIGHT = 320, 240
+
+
+@pytest.fixture()
+def plant():
+    with ArmPlant(shipped_urdf("paper_rrr")) as arm:
+        yield arm
+
+
+def _segmentation(plant, camera):
+    view, projection = render.view_matrices(camera, BOUNDS)
+    _, _, _, _, seg = pybullet.getCameraImage(
+        WIDTH, HEIGHT, viewMatrix=view, projectionMatrix=projection,
+        renderer=pybullet.ER_TINY_RENDERER, physicsClientId=plant.client)
+    return np.asarray(seg, dtype=np.int64).reshape(HEIGHT, WIDTH)
+
+
+def _link_origin(plant, link):
+    state = pybullet.getLinkState(plant.body, link, computeForwardKinematics=True,
+                                  physicsClientId=plant.client)
+    return np.array(state[4])
+
+
+@pytest.mark.parametrize("q", [(1.0807, 0.5756, -0.5), (0.3, 0.2, 0.4), (-0.6, 0.9, -1.2)])
+def test_projected_arm_points_land_on_the_rendered_arm(plant, q):
+    plant.reset(q)
+    camera = PinholeCamera.paper()
+    seg = _segmentation(plant, camera)
+    tip = plant.tip_position()
+    elbow = _link_origin(plant, plant.joints[2])
+    for point in (tip, 0.5 * (tip + elbow)):
+        pixels, depth = camera.project(point[None, :])
+        assert depth[0] > 0.0
+        cols, rows = render.image_coordinates(pixels, BOUNDS, WIDTH, HEIGHT)
+        r, c = int(np.rint(rows[0])), int(np.rint(cols[0]))
+        window = seg[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
+        assert np.any(window == plant.body), (q, point, r, c)
+
+
+def test_image_coordinates_put_the_optical_axis_in_the_centre_and_u_to_the_left():
+    cols, rows = render.image_coordinates([0.0, 0.0, 100.0, 50.0], BOUNDS, WIDTH, HEIGHT)
+    np.testing.assert_allclose(cols, [160.0, 110.0])
+    np.testing.assert_allclose(rows, [120.0, 95.0])
+
+
+def test_render_draws_markers_in_their_colours(plant):
+    plant.reset((1.0807, 0.5756, -0.5))
+    camera = PinholeCamera.paper()
+    x = np.array([65.0, 65.0])
+    x_d = np.array([-100.0, -100.0])
+    rgb = render.render_camera_view(plant.client, camera, BOUNDS, WIDTH, HEIGHT, [
+        (x, render.COLOR_MEASURED, "ring"), (x_d, render.COLOR_DESIRED, "cross"),
+        (np.array([np.nan, np.nan]), render.COLOR_OBSERVED, "ring"), (None, (0, 0, 0), "ring")])
+    assert rgb.shape == (HEIGHT, WIDTH, 3) and rgb.dtype == np.uint8
+    cols, rows = render.image_coordinates(x_d, BOUNDS, WIDTH, HEIGHT)
+    assert tuple(rgb[int(np.rint(rows[0])), int(np.rint(cols[0]))]) == render.COLOR_DESIRED
+    cols, rows = render.image_coordinates(x, BOUNDS, WIDTH, HEIGHT)
+    r, c = int(np.rint(rows[0])), int(np.rint(cols[0]))
+    ring = rgb[r - 5:r + 6, c - 5:c + 6].reshape(-1, 3)
+    assert any(tuple(p) == render.COLOR_MEASURED for p in ring)
+    assert not np.any(np.all(rgb == render.COLOR_OBSERVED, axis=2))
+
+
+def test_unknown_marker_shape_is_refused():
+    with pytest.raises(ValueError, match="marker shape"):
+        render.draw_marker(np.zeros((10, 10, 3), np.uint8), 5, 5, (1, 2, 3), shape="star")
