@@ -88,6 +88,11 @@ SIM_PARAMS = (
 
 CONTROLLER_PARAMS = (
     ParamSpec("model", "paper_rrr", "str", "Robot + camera model name (see model.MODELS)."),
+    ParamSpec("joint_names", lambda m: [f"joint{i + 1}" for i in range(m.n)], "str_list",
+              "ROS node: joints taken from /joint_states, in the order of the torque command."),
+    ParamSpec("timing_mode", "lockstep", "str",
+              "ROS node: QoS of the measurement subscriptions; must match sim_node.timing_mode "
+              "(lockstep: reliable; realtime: best-effort sensor data)."),
     ParamSpec("sample_time", 0.005, "float", "Nominal control period T [s].", 1e-5, 1.0),
     ParamSpec("K", lambda m: [0.001] * (2 * m.m), "float_list",
               "Diagonal of the feedback gain K of eq (22), (2m,).", 0.0, None, True),
@@ -313,6 +318,10 @@ class ControllerConfig:
                    "projection.a_d_max": model.p_d, "torque_limit": model.n}
         for name, length in lengths.items():
             _require_length(v, name, length, section)
+        _require_length(v, "joint_names", model.n, section)
+        if v["timing_mode"] not in TIMING_MODES:
+            raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
+                              f"got {v['timing_mode']!r}")
         for name in ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z", "a_z_perp_init", "a_z_init",
                      "a_d_init", "trajectory.offset", "trajectory.a_cos", "trajectory.a_sin"):
             _require_finite(v, name, section)
@@ -362,6 +371,18 @@ def flatten(mapping, prefix=""):
     return flat
 
 
+def _coerce_numbers(value):
+    """Read '1e9' as a number like ROS 2's parameter parser does (YAML 1.1 keeps it a string)."""
+    if isinstance(value, list):
+        return [_coerce_numbers(v) for v in value]
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
 def read_param_file(path):
     """Read a ROS 2 parameter YAML into {section: flat params}."""
     with open(path, encoding="utf-8") as handle:
@@ -376,7 +397,8 @@ def read_param_file(path):
         body = data.get(section) or data.get("/" + section)
         if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
             raise ConfigError(f"{path}: needs a '{section}: ros__parameters:' mapping")
-        sections[section] = flatten(body["ros__parameters"])
+        sections[section] = {k: _coerce_numbers(v)
+                             for k, v in flatten(body["ros__parameters"]).items()}
     return sections
 
 
@@ -390,7 +412,7 @@ def apply_overrides(sections, overrides):
             raise ConfigError(f"--set {item!r}: expected sim_node.NAME=VALUE or "
                               f"controller_node.NAME=VALUE")
         try:
-            result[section][name] = yaml.safe_load(text)
+            result[section][name] = _coerce_numbers(yaml.safe_load(text))
         except yaml.YAMLError as exc:
             raise ConfigError(f"--set {item!r}: value is not valid YAML: {exc}") from None
     return result
