@@ -1,0 +1,90 @@
+"""Configuration: one YAML for both nodes, validated whole, refused with the name and rule."""
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import PAPER_CONFIG
+from visual_adaptive_servo.config import (
+    CONTROLLER_PARAMS, SIM_PARAMS, ConfigError, ControllerConfig, SimConfig, load_scenario,
+    read_param_file)
+from visual_adaptive_servo.controller import AdaptiveVisualTracker
+
+
+def test_reference_file_holds_every_number_of_the_paper(scenario):
+    c, s = scenario.controller, scenario.sim
+    np.testing.assert_allclose(c.K, [0.001, 0.001])
+    assert (c.alpha, c.gamma) == (10.0, 10.0)
+    np.testing.assert_allclose(c.Gamma_d, [300.0] * 8)
+    np.testing.assert_allclose(c.Gamma_z_perp, [600.0] * 2)
+    np.testing.assert_allclose(c.Gamma_z, [0.2] * 3)
+    np.testing.assert_allclose(c.a_z_perp_init, [0.1 * 700 * 3.0] * 2)
+    np.testing.assert_allclose(c.a_z_init, [3.0, 3.0, 3.0])
+    np.testing.assert_allclose(c.a_d_init, [0, 0, 0, 0, 0, 0, 15, 0])
+    assert c.sample_time == s.control_period == 0.005
+    assert s.physics_dt == 0.001
+    np.testing.assert_allclose(s.initial_positions, [1.0807, 0.5756, -0.5])
+    # the true parameters of the model are the paper's a_z_perp = f beta [l2, l3], a_z
+    np.testing.assert_allclose(c.model.a_z_perp, [270.0, 270.0])
+    np.testing.assert_allclose(c.model.a_z, [2.0, 2.0, 5.0])
+
+
+def test_every_schema_entry_has_a_description():
+    for spec in SIM_PARAMS + CONTROLLER_PARAMS:
+        assert spec.description.strip(), spec.name
+
+
+@pytest.mark.parametrize("override, message", [
+    ("controller_node.alpha=3.0", r"controller_node\.alpha: Theorem 1 requires alpha > gamma/3"),
+    ("controller_node.K=[0.001]", r"controller_node\.K: needs 2 values, got 1"),
+    ("controller_node.K=[0.001, 0.0]", r"controller_node\.K: every entry must be > 0"),
+    ("controller_node.gamma=-1.0", r"controller_node\.gamma: must be >= 0.0"),
+    ("controller_node.Gamma_d=[1, 1]", r"controller_node\.Gamma_d: needs 8 values, got 2"),
+    ("controller_node.model=ur5", r"controller_node\.model: unknown model name 'ur5'"),
+    ("controller_node.kp=3.0", r"controller_node: unknown parameter\(s\) \['kp'\]"),
+    ("controller_node.alpha=fast", r"controller_node\.alpha: must be a number, got 'fast'"),
+    ("controller_node.a_z_init=[3.0, .nan, 3.0]", r"controller_node\.a_z_init: must not contain"),
+    ("controller_node.a_z_init=[30.0, 3.0, 3.0]",
+     r"controller_node\.a_z_init: must lie within projection\.a_z_min/_max"),
+    ("controller_node.safety.fallback=brake", r"controller_node\.safety\.fallback: must be one of"),
+    ("sim_node.control_period=0.0055", r"sim_node\.control_period: must be a whole multiple"),
+    ("sim_node.initial_positions=[0.0, 1.0]", r"sim_node\.initial_positions: needs 3 values"),
+    ("sim_node.timing_mode=fast", r"sim_node\.timing_mode: must be one of"),
+    ("sim_node.image_bounds=[10, -10, -5, 5]", r"sim_node\.image_bounds: needs u_min < u_max"),
+    ("sim_node.camera_delay_frames=1.5", r"sim_node\.camera_delay_frames: must be an integer"),
+])
+def test_invalid_values_are_refused_with_name_and_rule(override, message):
+    with pytest.raises(ConfigError, match=message):
+        load_scenario(PAPER_CONFIG, [override])
+
+
+def test_broken_files_are_refused(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("sim_node: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        read_param_file(bad)
+    bad.write_text(yaml.safe_dump({"sim_node": {"ros__parameters": {}}}))
+    with pytest.raises(ConfigError, match="needs a 'controller_node: ros__parameters:'"):
+        read_param_file(bad)
+
+
+def test_scientific_notation_reads_as_a_number_like_ros():
+    scenario = load_scenario(PAPER_CONFIG, ["controller_node.torque_limit=[1e3, 1e3, 1e3]"])
+    np.testing.assert_allclose(scenario.controller.torque_limit, [1000.0] * 3)
+
+
+def test_invalid_runtime_change_applies_nothing(scenario):
+    ctl = AdaptiveVisualTracker(scenario.controller)
+    before = ctl.gains
+    with pytest.raises(ConfigError, match=r"controller_node\.Gamma_d: must be >= 0.0, got -1.0"):
+        ctl.update_gains(K=[0.01, 0.01], Gamma_d=[-1.0] * 8)
+    assert ctl.gains is before
+    ctl.update_gains(K=[0.01, 0.01])
+    np.testing.assert_allclose(ctl.gains.K, [0.01, 0.01])
+
+
+def test_configs_are_immutable(scenario):
+    with pytest.raises(ValueError):
+        scenario.controller.K[0] = 5.0
+    assert isinstance(scenario.sim, SimConfig)
+    assert isinstance(scenario.controller, ControllerConfig)
