@@ -154,6 +154,12 @@ def float_array_from_msg(msg):
     return values, labels
 
 
+def parameter_labels(model):
+    """Labels of the ``~/parameters`` array: a_z_perp.*, a_z.*, a_d.* of the model."""
+    return ([f"a_z_perp.{s}" for s in model.a_z_perp_labels]
+            + [f"a_z.{s}" for s in model.a_z_labels] + [f"a_d.{s}" for s in model.a_d_labels])
+
+
 def clock_to_msg(msgs, t):
     return msgs.Clock(clock=time_to_stamp(msgs, t))
 
