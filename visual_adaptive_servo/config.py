@@ -154,6 +154,9 @@ CONTROLLER_PARAMS = (
               True),
     ParamSpec("safety.camera_timeout", 0.1, "float",
               "No valid feature for this long = stale camera [s].", 1e-3, 60.0, True),
+    ParamSpec("safety.recovery_blend_time", 1.0, "float",
+              "When a stale camera comes back, blend x_d in again from the measured feature "
+              "over this time [s].", 0.0, 60.0, True),
     ParamSpec("safety.fallback", "gravity_compensation", "str",
               "After hold_time: gravity_compensation (estimated g(q) - D q_dot) or zero_torque.",
               runtime=True),

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field, replace
+from math import isfinite, sqrt
 
 import numpy as np
 
@@ -138,7 +139,7 @@ class Projection:
 
 
 def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=None,
-                min_singular_value=0.0):
+                min_singular_value=0.0, tensors=None):
     """Evaluate the paper's controller at one instant.
 
     Parameters
@@ -155,77 +156,86 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         of eq (19), so q_ddot_r stays the exact derivative of q_dot_r.
     min_singular_value : float
         Below this smallest singular value of J*, use a damped pseudo-inverse.
+    tensors : tuple, optional
+        ``model.kinematic_tensors(q, qd)`` if the caller has computed it already.
 
     Returns
     -------
     LawOutput
+
+    Notes
+    -----
+    All arrays here have a few elements, so each numpy call costs far more
+    than its arithmetic; the code is arranged to need few of them:
+    ``a.dot(b)`` instead of ``a @ b`` (3x cheaper on tiny arrays), the
+    estimated Jacobian kept as its two parts ``J_z_perp`` and ``U J_z`` of
+    eq (a1), and the regressors Y_z of eq (25) contracted without being formed.
     """
-    m2 = x.shape[0]
-    H, dH, dH_rate, W, W_rate = model.kinematic_tensors(q, qd)
-    H_rate = qd @ dH                                  # (m, p_z)
-    z_hat = H @ state.a_z                             # (m,)
-    z_rate_hat = H_rate @ state.a_z                   # model rate, hat{Z_dot}
-    Zh = np.repeat(z_hat, 2)
-    Zh_rate = np.repeat(z_rate_hat, 2)
+    H, dH, dH_rate, W, W_rate = model.kinematic_tensors(q, qd) if tensors is None else tensors
+    a_z_perp, a_z = state.a_z_perp, state.a_z
+    H_rate = qd.dot(dH)                               # (m, p_z), d/dt H along q_dot
+    z_hat = H.dot(a_z)                                # (m,)
+    z_rate_hat = H_rate.dot(a_z)                      # model rate, hat{Z_dot}
+    Zh = z_hat.repeat(2)
+    Zh_rate = z_rate_hat.repeat(2)
+    # eq (a1): J_hat(q, u) = J_perp - U J_z, with row 2i+k of U J_z = u_i[k] J_z_hat[i]
+    J_perp = W.dot(a_z_perp)                          # (2m, n)
+    J_z = dH.dot(a_z).repeat(2, axis=0)               # (2m, n), each point's row twice
 
     x_obs = state.x_obs
     e_obs = x_obs - xd                                # x_o - x_d
     dx_obs = x_obs - x                                # Delta x_o
     dx = x - xd                                       # Delta x
-    J_hat = model.image_jacobian(W, dH, x, state.a_z_perp, state.a_z)
-    Jq = J_hat @ qd
-    # eq (10): the observer
-    x_obs_dot = (Jq - 0.5 * Zh_rate * e_obs) / Zh - gains.alpha * dx_obs
+    # J_hat(q, x) q_dot, using J_z_hat q_dot = hat{Z_dot}
+    Jq = J_perp.dot(qd) - x * Zh_rate
+    # eq (10): the observer, x_o_dot = x_obs_model - alpha Delta x_o
+    x_obs_model = (Jq - 0.5 * Zh_rate * e_obs) / Zh
+    x_obs_dot = x_obs_model - gains.alpha * dx_obs
     x_r_dot = xd_dot - gains.gamma * e_obs
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
 
     # eq (24)
-    Y_perp = model.Y_z_perp(W, qd)
-    a_perp_dot = gains.Gamma_z_perp * (Y_perp.T @ (dx - dx_obs))
-    # eq (25) with Y_z* and Y_z** of the paper
-    Y_star = (model.Y_z(H, Jq / Zh) + model.Y_z_bar(H_rate, x + 0.5 * e_obs)
-              - 0.5 * model.Y_z(H, Zh_rate * e_obs / Zh))
-    Y_2star = 0.5 * model.Y_z_bar(H_rate, x_obs + xd) + model.Y_z(H, x_r_dot)
-    a_z_dot = -gains.Gamma_z * (Y_2star.T @ dx - Y_star.T @ dx_obs)
+    dx_minus_dx_obs = dx - dx_obs
+    a_perp_dot = gains.Gamma_z_perp * dx_minus_dx_obs.dot(model.Y_z_perp(W, qd))
+    # eq (25): -Gamma_z (Y_z**^T Delta x - Y_z*^T Delta x_o) with
+    #   Y_z*  = Y_z(q, Z^-1 J q_dot - 1/2 Z^-1 Z_dot e_obs) + Y_z_bar(q, q_dot, x + e_obs/2)
+    #   Y_z** = Y_z_bar(q, q_dot, (x_o + x_d)/2) + Y_z(q, x_r_dot).
+    # Y_z(H, psi)^T v = H^T (psi_i . v_i)_i, i.e. v.psi against H with its rows
+    # repeated per coordinate, so neither regressor is formed.  With u = (x_o + x_d)/2,
+    # x + e_obs/2 = Delta x + u.
+    u = 0.5 * (x_obs + xd)
+    w_H = x_obs_model * dx_obs - x_r_dot * dx
+    w_H_rate = dx * dx_obs - u * dx_minus_dx_obs
+    a_z_dot = gains.Gamma_z * (w_H.dot(H.repeat(2, axis=0))
+                               + w_H_rate.dot(H_rate.repeat(2, axis=0)))
 
     projection_active = False
     if projection is not None:
         a_perp_dot, a_z_dot, projection_active = projection.kinematic_rates(
             state, a_perp_dot, a_z_dot, H, gains.Gamma_z)
 
-    # eq (18): J* = J_hat(q, (x_o + x_d)/2) and its TOTAL time derivative
-    u = 0.5 * (x_obs + xd)
+    # eq (18): J* = J_hat(q, (x_o + x_d)/2) and its TOTAL time derivative, through
+    # q_dot (the *_rate tensors), the adaptation rates and u_dot
+    u_col = u[:, None]
     u_dot = 0.5 * (x_obs_dot + xd_dot)
-    J_star = model.image_jacobian(W, dH, u, state.a_z_perp, state.a_z)
-    J_z_hat = np.repeat(dH @ state.a_z, 2, axis=0)
-    J_z_hat_dot = np.repeat(dH_rate @ state.a_z + dH @ a_z_dot, 2, axis=0)
-    J_star_dot = (W_rate @ state.a_z_perp + W @ a_perp_dot
-                  - u_dot[:, None] * J_z_hat - u[:, None] * J_z_hat_dot)
-    Zh_dot_total = np.repeat(H_rate @ state.a_z + H @ a_z_dot, 2)
+    J_star = J_perp - u_col * J_z
+    J_z_dot = (dH_rate.dot(a_z) + dH.dot(a_z_dot)).repeat(2, axis=0)
+    J_star_dot = (W_rate.dot(a_z_perp) + W.dot(a_perp_dot)
+                  - u_dot[:, None] * J_z - u_col * J_z_dot)
+    Zh_dot_total = (z_rate_hat + H.dot(a_z_dot)).repeat(2)
 
-    G = J_star @ J_star.T
-    eig_min = np.linalg.eigvalsh(G)[0] if m2 > 2 else _eigmin_2x2(G)
-    sigma_min = float(np.sqrt(max(eig_min, 0.0)))
-    damped = sigma_min < min_singular_value
-    if damped:
-        # damped least squares (Nakamura): the damping grows as sigma_min -> 0
-        lam2 = min_singular_value**2 - sigma_min**2
-        G = G + lam2 * np.eye(m2)
-    G_inv = np.linalg.inv(G)
-
-    w = Zh * x_r_dot
-    y = G_inv @ w
-    qr_dot = J_star.T @ y                             # eq (18)
+    G_inv, sigma_min, damped = _damped_gram_inverse(J_star.dot(J_star.T), min_singular_value)
+    y = G_inv.dot(Zh * x_r_dot)
+    qr_dot = y.dot(J_star)                            # eq (18): J*^T (J* J*^T)^-1 Zh x_r_dot
     # eq (19), with J*^{+T} qr_dot = (J* J*^T)^{-1} Zh x_r_dot = y
-    v = J_star_dot.T @ y
-    b = Zh * x_r_ddot + Zh_dot_total * x_r_dot - J_star_dot @ qr_dot
-    qr_ddot = v + J_star.T @ (G_inv @ (b - J_star @ v))
+    v = y.dot(J_star_dot)                             # J*_dot^T y
+    b = Zh * x_r_ddot + Zh_dot_total * x_r_dot - J_star_dot.dot(qr_dot)
+    qr_ddot = v + G_inv.dot(b - J_star.dot(v)).dot(J_star)
 
     s = qd - qr_dot                                   # eq (20)
     Y_d = model.dynamic_regressor(q, qd, qr_dot, qr_ddot)
-    Js = J_star @ s
-    tau = -J_star.T @ (gains.K * Js) + Y_d @ state.a_d  # eq (22)
-    a_d_dot = -gains.Gamma_d * (Y_d.T @ s)            # eq (23)
+    tau = Y_d.dot(state.a_d) - (gains.K * J_star.dot(s)).dot(J_star)  # eq (22)
+    a_d_dot = gains.Gamma_d * (qr_dot - qd).dot(Y_d)  # eq (23): -Gamma_d Y_d^T s
     if projection is not None:
         a_d_dot, active_d = projection.dynamic_rate(state.a_d, a_d_dot)
         projection_active = projection_active or active_d
@@ -234,10 +244,29 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
                      projection_active)
 
 
-def _eigmin_2x2(G):
-    a, b, d = G[0, 0], G[0, 1], G[1, 1]
-    half_tr = 0.5 * (a + d)
-    return half_tr - np.sqrt(max(0.25 * (a - d) ** 2 + b * b, 0.0))
+def _damped_gram_inverse(G, min_singular_value):
+    """((J* J*^T) + lam^2 I)^-1, sigma_min(J*) and whether lam > 0, from G = J* J*^T.
+
+    lam^2 = min_singular_value^2 - sigma_min^2 when sigma_min is below
+    ``min_singular_value`` (damped least squares, Nakamura: the damping grows
+    as sigma_min -> 0), else 0.  A 2x2 G (m = 1) is done in closed form.
+    """
+    m2 = G.shape[0]
+    if m2 == 2:
+        (a, b), (_, d) = G.tolist()
+        eig_min = 0.5 * (a + d) - sqrt(max(0.25 * (a - d) ** 2 + b * b, 0.0))
+    else:
+        eig_min = np.linalg.eigvalsh(G)[0]
+    sigma_min = sqrt(max(eig_min, 0.0))
+    damped = sigma_min < min_singular_value
+    lam2 = min_singular_value**2 - sigma_min**2 if damped else 0.0
+    if m2 != 2:
+        return np.linalg.inv(G + lam2 * np.eye(m2) if damped else G), sigma_min, damped
+    a, d = a + lam2, d + lam2
+    det = a * d - b * b
+    if det == 0.0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return np.array([[d / det, -b / det], [-b / det, a / det]]), sigma_min, damped
 
 
 @dataclass(frozen=True)

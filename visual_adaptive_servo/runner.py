@@ -143,9 +143,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     wall0 = time.perf_counter()
     try:
         for k in range(steps):
-            meas = sim.measure()
-            if faults is not None:
-                meas = faults(k, meas)
+            truth = sim.measure()
+            meas = truth if faults is None else faults(k, truth)
             res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
             counters["rejected"] += res.status != "ok"
             counters["fallback"] += res.status == "fallback"
@@ -153,8 +152,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             counters["projection_active"] += res.projection_active
             counters["damped"] += res.damped
             x = meas.pixels if meas.pixels is not None else np.nan
-            series.add(t=meas.t, x=x, x_true=meas.true_pixels, x_d=res.x_d, x_obs=res.x_obs, z=meas.true_depth,
-                       z_hat=res.z_hat, q=meas.q, qd=meas.qd, tau=res.tau,
+            series.add(t=meas.t, x=x, x_true=truth.true_pixels, x_d=res.x_d, x_obs=res.x_obs,
+                       z=truth.true_depth, z_hat=res.z_hat, q=truth.q, qd=truth.qd, tau=res.tau,
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
             series.status.append(res.status)
             if recorder is not None:
@@ -162,12 +161,13 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                              k % diag_every == 0 or res.status != last_status)
             last_status = res.status
             unsat = res.tau_unsaturated if res.tau_unsaturated is not None else res.tau
-            if not (np.all(np.isfinite(meas.q)) and np.all(np.isfinite(meas.qd))):
+            # divergence is judged on the plant itself, not on injected measurement faults
+            if not (np.all(np.isfinite(truth.q)) and np.all(np.isfinite(truth.qd))):
                 diverged, reason = True, f"joint state not finite at t={meas.t:.3f}"
             elif np.max(np.abs(unsat)) > limit:
                 diverged, reason = True, (f"|tau| = {np.max(np.abs(unsat)):.3g} N m > "
                                           f"divergence_torque {limit:g} at t={meas.t:.3f}")
-            elif np.max(np.abs(meas.qd)) > 1e3:
+            elif np.max(np.abs(truth.qd)) > 1e3:
                 diverged, reason = True, f"joint speed above 1e3 rad/s at t={meas.t:.3f}"
             if diverged:
                 log.error("diverged: %s", reason)

@@ -1,0 +1,271 @@
+"""Safe start, projection, saturation, the J* guard and bad input in the sampled controller."""
+
+import numpy as np
+import pytest
+
+from conftest import PAPER_CONFIG
+from visual_adaptive_servo.config import ControllerConfig, load_scenario
+from visual_adaptive_servo.controller import (
+    AdaptiveVisualTracker, EstimatorState, Projection, control_law, health)
+from visual_adaptive_servo.trajectory import BlendedStart, SinusoidTrajectory, quintic_blend
+
+Q0 = np.array([1.0807, 0.5756, -0.5000])
+T = 0.005
+
+
+def controller(**changes):
+    params = dict(load_scenario(PAPER_CONFIG).controller.params)
+    params.update(changes)
+    return AdaptiveVisualTracker(ControllerConfig.from_params(params))
+
+
+def measure(ctl, q=Q0):
+    return ctl.model.project(q)[0]
+
+
+# -- safe start -------------------------------------------------------------------------------
+def test_quintic_blend_is_c2_with_zero_end_derivatives():
+    taus = np.linspace(-0.1, 1.1, 2401)
+    vals = np.array([quintic_blend(t) for t in taus])
+    h = taus[1] - taus[0]
+    np.testing.assert_allclose(np.gradient(vals[:, 0], h)[2:-2], vals[2:-2, 1], atol=2e-3)
+    np.testing.assert_allclose(np.gradient(vals[:, 1], h)[2:-2], vals[2:-2, 2], atol=2e-2)
+    for tau in (0.0, 1.0):
+        _, d1, d2 = quintic_blend(tau)
+        assert d1 == 0.0 and d2 == 0.0
+
+
+def test_blended_start_begins_at_the_measurement_and_ends_on_the_trajectory():
+    traj = SinusoidTrajectory(np.array([45.0, 65.0]), np.array([20.0, 0.0]),
+                              np.array([0.0, 20.0]), np.pi / 3)
+    x0 = np.array([10.0, -30.0])
+    blend = BlendedStart(traj, x0, 1.0, 2.0)
+    x, xd, xdd = blend(1.0)
+    np.testing.assert_allclose(x, x0)
+    np.testing.assert_allclose(xd, 0.0, atol=1e-12)
+    np.testing.assert_allclose(xdd, 0.0, atol=1e-12)
+    for t in (3.0, 4.5):
+        for a, b in zip(blend(t), traj(t)):
+            np.testing.assert_allclose(a, b)
+    # derivatives are consistent (finite differences) inside the blend
+    h = 1e-5
+    for t in (1.3, 2.0, 2.9):
+        np.testing.assert_allclose((blend(t + h)[0] - blend(t - h)[0]) / (2 * h), blend(t)[1],
+                                   rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose((blend(t + h)[1] - blend(t - h)[1]) / (2 * h), blend(t)[2],
+                                   rtol=1e-5, atol=1e-5)
+
+
+def test_first_sample_has_zero_tracking_error_with_a_blend():
+    ctl = controller(start_blend_time=2.0)
+    q = Q0 + np.array([0.05, -0.03, 0.02])
+    x = measure(ctl, q)
+    res = ctl.step(0.0, q, np.zeros(3), x)
+    np.testing.assert_allclose(res.error, 0.0)
+    np.testing.assert_allclose(res.x_obs, x)
+
+
+def test_zero_blend_time_is_the_paper_start():
+    ctl = controller()
+    res = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    np.testing.assert_allclose(res.x_d, [65.0, 65.0])
+
+
+# -- projection (Remark 6) --------------------------------------------------------------------
+def make_projection(model, **bounds):
+    kw = dict(a_z_perp_min=np.full(2, 100.0), a_z_perp_max=np.full(2, 1000.0),
+              a_z_min=np.array([0.5, 0.5, 1.0]), a_z_max=np.array([10.0, 10.0, 20.0]),
+              a_d_min=np.full(8, -np.inf), a_d_max=np.full(8, np.inf), min_depth=2.0)
+    kw.update(bounds)
+    return Projection(**kw)
+
+
+def test_projection_leaves_rates_unchanged_inside_the_set(scenario, rng):
+    model = scenario.controller.model
+    proj = make_projection(model)
+    H = model.kinematic_tensors(Q0, np.zeros(3))[0]
+    state = EstimatorState(np.zeros(2), np.array([200.0, 300.0]), np.array([3.0, 3.0, 5.0]),
+                           np.zeros(8))
+    for _ in range(10):
+        a_perp_dot, a_z_dot = rng.normal(size=2) * 10, rng.normal(size=3)
+        p, z, active = proj.kinematic_rates(state, a_perp_dot, a_z_dot, H, np.full(3, 0.2))
+        np.testing.assert_array_equal(p, a_perp_dot)
+        np.testing.assert_array_equal(z, a_z_dot)
+        assert not active
+
+
+def test_projection_stops_rates_that_leave_the_set(scenario):
+    model = scenario.controller.model
+    proj = make_projection(model)
+    H = model.kinematic_tensors(Q0, np.zeros(3))[0]
+    # on the lower box face of a_z_perp[0], and exactly on the depth half-space
+    a_z = np.array([1.0, 1.0, 0.0])
+    a_z[2] = 2.0 - H[0, :2] @ a_z[:2]
+    state = EstimatorState(np.zeros(2), np.array([100.0, 300.0]), a_z, np.zeros(8))
+    p, z, active = proj.kinematic_rates(state, np.array([-5.0, 1.0]), -np.ones(3), H,
+                                        np.full(3, 0.2))
+    assert active
+    assert p[0] == 0.0 and p[1] == 1.0
+    assert H[0] @ z >= -1e-12  # the estimated depth no longer decreases
+
+
+def test_clamp_puts_a_finite_step_back_into_the_set(scenario):
+    model = scenario.controller.model
+    proj = make_projection(model)
+    H = model.kinematic_tensors(Q0, np.zeros(3))[0]
+    state = EstimatorState(np.zeros(2), np.array([50.0, 5000.0]), np.array([0.6, 0.6, 1.0]),
+                           np.zeros(8))
+    out = proj.clamp(state, H)
+    np.testing.assert_array_equal(out.a_z_perp, [100.0, 1000.0])
+    assert H[0] @ out.a_z >= 2.0 - 1e-12
+
+
+def test_estimates_never_leave_the_bounds_in_closed_loop(tmp_path):
+    from visual_adaptive_servo.runner import run_scenario
+
+    # tight bounds around the wrong initial estimates force the projection to act
+    scenario = load_scenario(PAPER_CONFIG, [
+        "controller_node.projection.a_z_perp_min=[205.0, 205.0]",
+        "controller_node.projection.a_z_perp_max=[215.0, 215.0]",
+        "controller_node.projection.a_z_min=[2.9, 2.9, 2.9]",
+        "controller_node.projection.a_z_max=[3.1, 3.1, 3.1]"])
+    summary = run_scenario(scenario, str(tmp_path), duration=3.0, progress=False, record=False,
+                           plots=False)
+    assert summary["projection_active"] > 0
+    data = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
+    for name in ("f_beta_l2", "f_beta_l3"):
+        assert np.all((data[f"a_z_perp{name}"] >= 205.0) & (data[f"a_z_perp{name}"] <= 215.0))
+    for name in ("l2", "l3", "d_C"):
+        assert np.all((data[f"a_z{name}"] >= 2.9) & (data[f"a_z{name}"] <= 3.1))
+
+
+# -- torque limit and the J* guard --------------------------------------------------------------
+def test_torque_saturates_at_the_limit_and_is_reported():
+    ctl = controller(torque_limit=[5.0, 5.0, 5.0])
+    res = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    assert res.saturated
+    assert np.max(np.abs(res.tau)) <= 5.0
+    assert np.max(np.abs(res.tau_unsaturated)) > 5.0
+    assert health(res)[0] == "WARN" and "saturated" in health(res)[1]
+
+
+def test_singular_j_star_is_damped_not_a_crash(scenario):
+    model = scenario.controller.model
+    c = scenario.controller
+    gains = AdaptiveVisualTracker(c).gains
+    q = Q0
+    x = model.project(q)[0]
+    # with a_z_perp_hat = 0, J* = -U J_z_hat has rank one: exactly what projection prevents
+    state = EstimatorState(x, np.zeros(2), np.array(c.a_z_init), np.zeros(8))
+    xd = (x, np.zeros(2), np.zeros(2))
+    with pytest.raises(np.linalg.LinAlgError):
+        control_law(model, gains, state, q, np.zeros(3), x, *xd)
+    out = control_law(model, gains, state, q, np.zeros(3), x, *xd, min_singular_value=50.0)
+    assert out.sigma_min < 1e-6
+    assert out.damped
+    assert np.all(np.isfinite(out.tau)) and np.all(np.isfinite(out.qr_ddot))
+
+
+# -- bad input ----------------------------------------------------------------------------------
+BAD_SAMPLES = [
+    ("q", np.array([np.nan, 0.5, -0.5]), "joint positions q: contains NaN"),
+    ("q", np.array([1.0, 0.5]), "joint positions q: expected 3 values"),
+    ("qd", np.array([0.0, np.inf, 0.0]), "joint velocities qd: contains NaN or inf"),
+    ("x", np.array([np.nan, 65.0]), "feature x: contains NaN"),
+    ("x", np.array([65.0, 65.0, 1.0]), "feature x: expected 2 values"),
+    ("x", np.array([900.0, 65.0]), "outside the image bounds"),
+    ("x", None, "feature x: missing"),
+]
+
+
+@pytest.mark.parametrize("which, value, message", BAD_SAMPLES)
+def test_bad_sample_is_rejected_without_touching_the_state(which, value, message):
+    ctl = controller()
+    good = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    state_before, rates_before = ctl.state, ctl.rates
+    args = {"q": Q0, "qd": np.zeros(3), "x": measure(ctl)}
+    args[which] = value
+    res = ctl.step(T, args["q"], args["qd"], args["x"])
+    assert res.status == "hold"
+    assert any(message in p for p in res.problems), res.problems
+    np.testing.assert_array_equal(res.tau, good.tau)
+    assert ctl.state is state_before and ctl.rates is rates_before
+    assert health(res)[0] == "WARN"
+
+
+def test_degenerate_estimates_without_guards_reject_the_sample_not_crash():
+    # a_hat = 0: J* = 0 and z_hat = 0, what projection and damping exist to prevent
+    ctl = controller(**{"projection.enabled": False, "a_z_perp_init": [0.0, 0.0],
+                        "a_z_init": [0.0, 0.0, 0.0], "min_singular_value": 0.0})
+    with np.errstate(all="ignore"):
+        res = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    assert res.status == "fallback"
+    assert "singular" in res.problems[0] or "not finite" in res.problems[0]
+    assert ctl.t_last is None
+
+
+def test_time_going_backwards_is_rejected():
+    ctl = controller()
+    ctl.step(1.0, Q0, np.zeros(3), measure(ctl))
+    res = ctl.step(0.5, Q0, np.zeros(3), measure(ctl))
+    assert res.status == "hold" and "not after the last sample" in res.problems[0]
+
+
+def test_hold_then_gravity_compensation_then_recovery_with_a_new_blend():
+    ctl = controller(**{"safety.hold_time": 0.02, "safety.camera_timeout": 0.05,
+                        "safety.fallback_damping": 2.0})
+    t = 0.0
+    ok = ctl.step(t, Q0, np.zeros(3), measure(ctl))
+    statuses = []
+    qd = np.array([0.1, -0.2, 0.05])
+    for k in range(1, 20):               # 95 ms without a camera
+        statuses.append(ctl.step(k * T, Q0, qd, None))
+    assert [s.status for s in statuses[:4]] == ["hold"] * 4
+    np.testing.assert_array_equal(statuses[0].tau, ok.tau)
+    fallback = statuses[-1]
+    assert fallback.status == "fallback" and health(fallback)[0] == "ERROR"
+    zero = np.zeros(3)
+    g_hat = ctl.model.dynamic_regressor(Q0, zero, zero, zero) @ ctl.state.a_d
+    np.testing.assert_allclose(fallback.tau, g_hat - 2.0 * qd)
+    assert ctl.stale
+    # the camera comes back somewhere else: restart at the measurement, no jump in x_d
+    q_new = Q0 + np.array([0.02, 0.01, -0.01])
+    back = ctl.step(20 * T, q_new, np.zeros(3), measure(ctl, q_new))
+    assert back.status == "ok" and not ctl.stale
+    np.testing.assert_allclose(back.error, 0.0, atol=1e-12)
+
+
+def test_zero_torque_fallback_and_invalid_joint_state_give_zero():
+    ctl = controller(**{"safety.fallback": "zero_torque", "safety.hold_time": 0.0})
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    res = ctl.step(0.1, Q0, np.zeros(3), None)
+    assert res.status == "fallback"
+    np.testing.assert_array_equal(res.tau, np.zeros(3))
+    ctl = controller(**{"safety.hold_time": 0.0})
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    res = ctl.step(0.1, np.full(3, np.nan), np.zeros(3), measure(ctl))
+    np.testing.assert_array_equal(res.tau, np.zeros(3))
+
+
+def test_non_finite_update_is_not_committed():
+    ctl = controller()
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    before = ctl.state
+    # a huge but finite velocity overflows the update: rejected, state kept
+    with np.errstate(all="ignore"):
+        res = ctl.step(T, Q0, np.full(3, 1e300), measure(ctl))
+    assert res.status == "hold" and "not finite" in res.problems[0]
+    assert ctl.state is before
+
+
+def test_simulator_refuses_bad_commands_and_applies_zero(scenario):
+    from sim_bridge.simulator import Simulator
+
+    sim = Simulator(scenario.sim)
+    try:
+        assert "expected 3 torques" in sim.apply([1.0, 2.0])
+        np.testing.assert_array_equal(sim.tau, np.zeros(3))
+        assert "NaN or inf" in sim.apply([1.0, np.nan, 0.0])
+        assert sim.apply([1.0, 0.0, 0.0]) is None
+    finally:
+        sim.close()
