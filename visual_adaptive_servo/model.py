@@ -110,7 +110,7 @@ class RobotCameraModel(ABC):
     @staticmethod
     def Y_z_perp(W, qd):
         """Y_z_perp(q, q_dot) (2m, p_perp) with J_z_perp q_dot = Y_z_perp a_z_perp."""
-        return qd @ W
+        return np.asarray(qd).dot(W)  # = qd @ W; dot is the cheaper call on tiny arrays
 
     def image_jacobian(self, W, dH, u, a_z_perp, a_z):
         """J(q, u) = J_z_perp(q) - U J_z(q) of eq (a1), shape (2m, n).
@@ -225,29 +225,37 @@ class PaperRRRCamera(RobotCameraModel):
         return np.array([P1, P2, P3, A, B, Cc, G1, G2])
 
     def kinematic_tensors(self, q, qd):
-        q1, q2, q3 = q
-        w1, w2, w3 = qd
+        # Python floats and one array for all five tensors: at n = 3 creating
+        # small arrays costs more than the trigonometry (hot path, every sample)
+        q1, q2, q3 = np.asarray(q, dtype=float).tolist()
+        w1, w2, w3 = np.asarray(qd, dtype=float).tolist()
         s1, c1, s2, c2 = sin(q1), cos(q1), sin(q2), cos(q2)
         s23, c23 = sin(q2 + q3), cos(q2 + q3)
         w23 = w2 + w3
-        # depth z = [c1 c2, c1 c23, 1] . a_z
-        H = np.array([[c1 * c2, c1 * c23, 1.0]])
-        dH = np.array([[[-s1 * c2, -s1 * c23, 0.0],
-                        [-c1 * s2, -c1 * s23, 0.0],
-                        [0.0, -c1 * s23, 0.0]]])
-        # time derivative of dH entry by entry (chain rule along qd)
-        dH_rate = np.array([[[-c1 * c2 * w1 + s1 * s2 * w2, -c1 * c23 * w1 + s1 * s23 * w23, 0.0],
-                             [s1 * s2 * w1 - c1 * c2 * w2, s1 * s23 * w1 - c1 * c23 * w23, 0.0],
-                             [0.0, s1 * s23 * w1 - c1 * c23 * w23, 0.0]]])
-        # image-plane part: [r_y, r_z - l1] = [[s1 c2, s1 c23], [s2, s23]] @ [l2, l3]
-        W = np.array([[[c1 * c2, c1 * c23], [-s1 * s2, -s1 * s23], [0.0, -s1 * s23]],
-                      [[0.0, 0.0], [c2, c23], [0.0, c23]]])
-        W_rate = np.array([
-            [[-s1 * c2 * w1 - c1 * s2 * w2, -s1 * c23 * w1 - c1 * s23 * w23],
-             [-c1 * s2 * w1 - s1 * c2 * w2, -c1 * s23 * w1 - s1 * c23 * w23],
-             [0.0, -c1 * s23 * w1 - s1 * c23 * w23]],
-            [[0.0, 0.0], [-s2 * w2, -s23 * w23], [0.0, -s23 * w23]]])
-        return H, dH, dH_rate, W, W_rate
+        c1c2, c1c23, c1s2, c1s23 = c1 * c2, c1 * c23, c1 * s2, c1 * s23
+        s1c2, s1c23, s1s2, s1s23 = s1 * c2, s1 * c23, s1 * s2, s1 * s23
+        buf = np.array([
+            # H: depth z = [c1 c2, c1 c23, 1] . a_z                              (1, 3)
+            c1c2, c1c23, 1.0,
+            # dH = dH/dq                                                         (1, 3, 3)
+            -s1c2, -s1c23, 0.0,
+            -c1s2, -c1s23, 0.0,
+            0.0, -c1s23, 0.0,
+            # dH_rate: time derivative of dH entry by entry (chain rule along qd)
+            -c1c2 * w1 + s1s2 * w2, -c1c23 * w1 + s1s23 * w23, 0.0,
+            s1s2 * w1 - c1c2 * w2, s1s23 * w1 - c1c23 * w23, 0.0,
+            0.0, s1s23 * w1 - c1c23 * w23, 0.0,
+            # W, image-plane part: [r_y, r_z - l1] = [[s1 c2, s1 c23], [s2, s23]] @ [l2, l3]
+            c1c2, c1c23, -s1s2, -s1s23, 0.0, -s1s23,                             # (2, 3, 2)
+            0.0, 0.0, c2, c23, 0.0, c23,
+            # W_rate
+            -s1c2 * w1 - c1s2 * w2, -s1c23 * w1 - c1s23 * w23,
+            -c1s2 * w1 - s1c2 * w2, -c1s23 * w1 - s1c23 * w23,
+            0.0, -c1s23 * w1 - s1c23 * w23,
+            0.0, 0.0, -s2 * w2, -s23 * w23, 0.0, -s23 * w23,
+        ])
+        return (buf[:3].reshape(1, 3), buf[3:12].reshape(1, 3, 3), buf[12:21].reshape(1, 3, 3),
+                buf[21:33].reshape(2, 3, 2), buf[33:].reshape(2, 3, 2))
 
     def _dynamic_basis(self, q):
         _, q2, q3 = q
@@ -275,6 +283,46 @@ class PaperRRRCamera(RobotCameraModel):
         return M, dM, g
 
     def dynamic_regressor(self, q, qd, xi, xi_dot):
+        """Y_d in closed form: the Christoffel sums of :func:`_lagrangian_regressor` by hand.
+
+        Column by column, with w = q_dot, e = xi_dot, w23 = w2 + w3,
+        h2 = s2 c23 + c2 s23 and h3 = c2 s23::
+
+            P1: [e1, 0, 0]
+            P2: [c2^2 e1 - c2 s2 (w2 xi1 + w1 xi2), c2 s2 w1 xi1, 0]
+            P3: [c23^2 e1 - c23 s23 (w23 xi1 + w1 (xi2 + xi3)), c23 s23 w1 xi1, (same)]
+            A:  [0, e2, 0]
+            B:  [0, e2 + e3, e2 + e3]
+            Cc: [2 c2 c23 e1 - (h2 w2 + h3 w3) xi1 - (h2 xi2 + h3 xi3) w1,
+                 c3 (2 e2 + e3) - s3 (w3 xi2 + w23 xi3) + h2 w1 xi1,
+                 c3 e2 + s3 w2 xi2 + h3 w1 xi1]
+            G1: [0, c2, 0]
+            G2: [0, c23, c23]
+
+        :meth:`generic_dynamic_regressor` is the same quantity from the basis.
+        """
+        _, q2, q3 = np.asarray(q, dtype=float).tolist()
+        w1, w2, w3 = np.asarray(qd, dtype=float).tolist()
+        x1, x2, x3 = np.asarray(xi, dtype=float).tolist()
+        e1, e2, e3 = np.asarray(xi_dot, dtype=float).tolist()
+        s2, c2, s3, c3 = sin(q2), cos(q2), sin(q3), cos(q3)
+        s23, c23 = sin(q2 + q3), cos(q2 + q3)
+        w23 = w2 + w3
+        h2 = s2 * c23 + c2 * s23
+        h3 = c2 * s23
+        p3 = c23 * s23 * w1 * x1
+        return np.array([
+            [e1, c2 * c2 * e1 - c2 * s2 * (w2 * x1 + w1 * x2),
+             c23 * c23 * e1 - c23 * s23 * (w23 * x1 + w1 * (x2 + x3)), 0.0, 0.0,
+             2.0 * c2 * c23 * e1 - (h2 * w2 + h3 * w3) * x1 - (h2 * x2 + h3 * x3) * w1,
+             0.0, 0.0],
+            [0.0, c2 * s2 * w1 * x1, p3, e2, e2 + e3,
+             c3 * (2.0 * e2 + e3) - s3 * (w3 * x2 + w23 * x3) + h2 * w1 * x1, c2, c23],
+            [0.0, 0.0, p3, 0.0, e2 + e3, c3 * e2 + s3 * w2 * x2 + h3 * w1 * x1, 0.0, c23],
+        ])
+
+    def generic_dynamic_regressor(self, q, qd, xi, xi_dot):
+        """Y_d from the basis of M and g by :func:`_lagrangian_regressor` (any model's way)."""
         M, dM, g = self._dynamic_basis(q)
         return _lagrangian_regressor(M, dM, g, np.asarray(qd, float), np.asarray(xi, float),
                                      np.asarray(xi_dot, float))
