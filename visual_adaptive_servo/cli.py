@@ -54,6 +54,31 @@ def cmd_run(args):
     return 1 if summary["diverged"] or summary.get("error") else 0
 
 
+def cmd_robustness(args):
+    import os
+
+    from .recording import write_json
+    from .robustness import CASES, markdown_table, run_case
+
+    os.makedirs(args.out, exist_ok=True)
+    results = []
+    for i, case in enumerate(CASES):
+        print(f"[{i + 1}/{len(CASES)}] {case.name}", file=sys.stderr)
+        results.append((case, run_case(case, os.path.join(args.out, f"case{i:02d}"),
+                                       args.duration)))
+    table = markdown_table(results)
+    with open(os.path.join(args.out, "robustness.md"), "w", encoding="utf-8") as handle:
+        handle.write(f"# Robustness matrix ({args.duration:g} s per case)\n\n{table}\n")
+    write_json(os.path.join(args.out, "robustness.json"),
+               {case.name: summary for case, summary in results})
+    print(table)
+    failed = [c.name for c, s in results
+              if s["diverged"] or s["final_rms_true_error_px"] > c.rms_bound_px]
+    if failed:
+        print(f"outside their bounds: {failed}", file=sys.stderr)
+    return 1 if failed else 0
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="vas", description=__doc__.split("\n\n")[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log every rejected sample")
@@ -74,6 +99,10 @@ def build_parser():
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on a terminal)")
     run.set_defaults(func=cmd_run)
+    rob = sub.add_parser("robustness", help="run the robustness matrix and write its table")
+    rob.add_argument("--out", required=True, help="output folder (created)")
+    rob.add_argument("--duration", type=float, default=10.0, help="simulated seconds per case")
+    rob.set_defaults(func=cmd_robustness)
     return parser
 
 
