@@ -58,8 +58,9 @@ class EstimatorState:
                               self.a_z + dt * rates.a_z, self.a_d + dt * rates.a_d)
 
     def is_finite(self):
-        return all(np.all(np.isfinite(v)) for v in
-                   (self.x_obs, self.a_z_perp, self.a_z, self.a_d))
+        # math.isfinite over Python floats: np.all(np.isfinite(.)) costs ~3 us per tiny array
+        return all(isfinite(v) for a in (self.x_obs, self.a_z_perp, self.a_z, self.a_d)
+                   for v in a.tolist())
 
 
 @dataclass(frozen=True)
@@ -328,7 +329,7 @@ def validate_vector(name, value, size):
     arr = np.asarray(value, dtype=float)
     if arr.shape != (size,):
         raise InputError(f"{name}: expected {size} values, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not all(map(isfinite, arr.tolist())):
         raise InputError(f"{name}: contains NaN or inf: {arr.tolist()}")
     return arr
 
