@@ -108,12 +108,12 @@ class Projection:
     def _inside(self, name, a):
         """Every element of ``a`` strictly inside its bounds: no rate can be blocked."""
         lo, hi = self._bounds[name]
-        return all(l < v < h for v, l, h in zip(a.tolist(), lo, hi))
+        return all(low < v < high for v, low, high in zip(a.tolist(), lo, hi))
 
     def _within(self, name, a):
         """Every element of ``a`` within its closed bounds: clipping changes nothing."""
         lo, hi = self._bounds[name]
-        return all(l <= v <= h for v, l, h in zip(a.tolist(), lo, hi))
+        return all(low <= v <= high for v, low, high in zip(a.tolist(), lo, hi))
 
     @staticmethod
     def _box(a, rate, lo, hi):
