@@ -64,7 +64,7 @@ def test_vas_run_writes_every_output_and_a_readable_mcap(tmp_path, capsys):
     assert summary["sim_time_s"] == pytest.approx(1.0)
     with AnyReader([out / "run.mcap"]) as reader:
         found = {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
-        for topic, short in TOPICS.items():
+        for topic in TOPICS:
             assert topic in found, topic
         assert found["/joint_states"] == ("sensor_msgs/msg/JointState", 200)
         conn = [c for c in reader.connections if c.topic == "/camera/features"]

@@ -66,8 +66,8 @@ def lyapunov_terms(model, gains, y, out, x, desired):
     d_ap, d_az = st.a_z_perp - model.a_z_perp, st.a_z - model.a_z
     s, Js = out.s, out.J_star @ out.s
     V1 = 0.5 * s @ model.mass_matrix(q) @ s + 0.5 * d_ad @ (d_ad / gains.Gamma_d)
-    V2 = (0.5 * d_xo @ (z * d_xo) + 0.5 * d_x @ (z * d_x) + 0.5 * d_ap @ (d_ap / gains.Gamma_z_perp)
-          + 0.5 * d_az @ (d_az / gains.Gamma_z))
+    V2 = (0.5 * d_xo @ (z * d_xo) + 0.5 * d_x @ (z * d_x)
+          + 0.5 * d_ap @ (d_ap / gains.Gamma_z_perp) + 0.5 * d_az @ (d_az / gains.Gamma_z))
     V1_rate = -Js @ (gains.K * Js)
     integrand = Js @ (Js / z) / gains.gamma      # -d(Pi*)/dt
     # eq (32): the exact rate of V2, Pi* included

@@ -74,10 +74,11 @@ def test_kinematic_tensor_rates_match_finite_difference(model, rng):
     for _ in range(10):
         q, qd = random_state(rng)
         _, _, dH_rate, _, W_rate = model.kinematic_tensors(q, qd)
-        np.testing.assert_allclose(dH_rate, fd(lambda p: model.kinematic_tensors(p, qd)[1], q, qd),
-                                   atol=1e-7)
-        np.testing.assert_allclose(W_rate, fd(lambda p: model.kinematic_tensors(p, qd)[3], q, qd),
-                                   atol=1e-7)
+        def tensor(index, qd=qd):
+            return lambda p: model.kinematic_tensors(p, qd)[index]
+
+        np.testing.assert_allclose(dH_rate, fd(tensor(1), q, qd), atol=1e-7)
+        np.testing.assert_allclose(W_rate, fd(tensor(3), q, qd), atol=1e-7)
 
 
 def test_image_jacobian_decomposition_matches_eq_a5(model, rng):

@@ -19,7 +19,8 @@ def _floats(text):
     try:
         return [float(v) for v in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers, got {text!r}") from None
 
 
 def _run_overrides(args):
@@ -87,7 +88,8 @@ def build_parser():
     run.add_argument("--config", required=True, help="ROS parameter YAML (sim_node + "
                      "controller_node), e.g. config/paper_3dof.yaml")
     run.add_argument("--out", required=True, help="output folder (created)")
-    run.add_argument("--duration", type=float, help="simulated seconds (default: sim_node.duration)")
+    run.add_argument("--duration", type=float,
+                     help="simulated seconds (default: sim_node.duration)")
     run.add_argument("--initial-positions", type=_floats, metavar="A,B,C",
                      help="joint positions at start [rad]")
     run.add_argument("--pixel-noise", type=float, metavar="STD", help="pixel noise std [px]")

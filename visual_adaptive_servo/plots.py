@@ -8,7 +8,6 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
-import numpy as np  # noqa: E402
 
 
 def _save(fig, path):
@@ -30,7 +29,8 @@ def plot_run(series, out_dir, labels):
     err = series["x"] - series["x_d"]
     fig, ax = plt.subplots(figsize=(7, 4))
     for i in range(err.shape[1]):
-        ax.plot(t, err[:, i], label=f"{'uv'[i % 2]}{i // 2 + 1} - {'uv'[i % 2]}d{i // 2 + 1}")
+        axis, point = "uv"[i % 2], i // 2 + 1
+        ax.plot(t, err[:, i], label=f"{axis}{point} - {axis}d{point}")
     ax.set(xlabel="time [s]", ylabel="image error [px]",
            title="Image-space tracking error x - x_d (paper Fig. 2)")
     ax.grid(True)
@@ -41,7 +41,8 @@ def plot_run(series, out_dir, labels):
     for i in range(series["z"].shape[1]):
         ax.plot(t, series["z"][:, i], label=f"z{i + 1} actual")
         ax.plot(t, series["z_hat"][:, i], "--", label=f"z{i + 1} estimated")
-    ax.set(xlabel="time [s]", ylabel="depth [m]", title="Actual and estimated depth (paper Fig. 3)")
+    ax.set(xlabel="time [s]", ylabel="depth [m]",
+           title="Actual and estimated depth (paper Fig. 3)")
     ax.grid(True)
     ax.legend()
     paths.append(_save(fig, os.path.join(out_dir, "depth.png")))

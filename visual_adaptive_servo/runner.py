@@ -58,7 +58,8 @@ class Series:
 
     def __init__(self, steps, model):
         n, m2, m = model.n, 2 * model.m, model.m
-        shapes = {"t": (), "x": (m2,), "x_true": (m2,), "x_d": (m2,), "x_obs": (m2,), "z": (m,), "z_hat": (m,),
+        shapes = {"t": (), "x": (m2,), "x_true": (m2,), "x_d": (m2,), "x_obs": (m2,), "z": (m,),
+                  "z_hat": (m,),
                   "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
                   "a_z": (model.p_z,), "a_d": (model.p_d,)}
         self.data = {k: np.full((steps,) + s, np.nan) for k, s in shapes.items()}
