@@ -43,8 +43,9 @@ def cmd_run(args):
     summary = run_scenario(scenario, args.out, duration=args.duration, progress=args.progress,
                            record=not args.no_bag)
     print(json.dumps({k: summary[k] for k in (
-        "diverged", "final_rms_error_px", "max_error_px", "max_abs_torque", "final_depth_error",
-        "sim_time_s", "wall_time_s", "realtime_factor")}, indent=2))
+        "diverged", "final_rms_error_px", "max_error_px", "final_rms_true_error_px",
+        "max_abs_torque", "final_depth_error", "sim_time_s", "wall_time_s", "realtime_factor")},
+        indent=2))
     print(f"outputs in {args.out}: {', '.join(summary['outputs'])}")
     if summary["diverged"]:
         print(f"DIVERGED: {summary['divergence_reason']}", file=sys.stderr)
