@@ -383,6 +383,7 @@ class AdaptiveVisualTracker:
         self.last_tau = np.zeros(self.model.n)
         self.t_last_tau = None
         self.stale = False
+        self._rejecting = ()        # kinds of problem of the current rejection streak
 
     def update_gains(self, **changes):
         """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
@@ -441,9 +442,11 @@ class AdaptiveVisualTracker:
         restarting = self.t_last is None or self.stale
         if restarting:
             state = replace(self.state, x_obs=x.copy())
-            self.desired = BlendedStart(self.trajectory, x.copy(), t,
-                                        self.config.start_blend_time)
+            blend = (self.config.start_blend_time if self.t_last is None
+                     else self.config["safety.recovery_blend_time"])
+            desired = BlendedStart(self.trajectory, x.copy(), t, blend)
         else:
+            desired = self.desired
             dt = min(t - self.t_last, self.config.max_dt)
             state = self.state.advanced(self.rates, dt)
         H = None
@@ -451,9 +454,13 @@ class AdaptiveVisualTracker:
             H = self.model.kinematic_tensors(q, qd)[0]
             state = self.projection.clamp(state, H)
 
-        xd, xd_dot, xd_ddot = self.desired(t)
-        out = control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                          self.projection, self.config.min_singular_value)
+        xd, xd_dot, xd_ddot = desired(t)
+        try:
+            out = control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                              self.projection, self.config.min_singular_value)
+        except np.linalg.LinAlgError:
+            return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
+                                           "its pseudo-inverse; state kept)"])
         if not (np.all(np.isfinite(out.tau)) and out.rates.is_finite() and state.is_finite()):
             return self._reject(t, q, qd, ["controller update is not finite (state kept)"])
 
@@ -463,15 +470,23 @@ class AdaptiveVisualTracker:
         # commit
         if restarting and self.stale:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
+        self.desired = desired
         self.state, self.rates, self.t_last, self.t_last_feature = state, out.rates, t, t
         self.stale = False
+        if self._rejecting:
+            log.info("input valid again at t=%.4f", t)
+            self._rejecting = ()
         self.last_tau, self.t_last_tau = tau, t
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
 
     def _reject(self, t, q, qd, problems):
-        for p in problems:
-            log.warning("sample at t=%.4f rejected: %s", t, p)
+        # log when the kind of problem changes, not at every sample of a long outage
+        kinds = tuple(p.split(":")[0] for p in problems)
+        if kinds != self._rejecting:
+            for p in problems:
+                log.warning("sample at t=%.4f rejected: %s", t, p)
+            self._rejecting = kinds
         safety = self.config
         xd = self.desired_at(t)[0] if self.t_last is not None else np.full(2 * self.model.m,
                                                                               np.nan)
@@ -500,10 +515,11 @@ def health(result):
     values = {"status": result.status, "saturated": result.saturated,
               "projection_active": result.projection_active, "damped_pinv": result.damped,
               "sigma_min_J_star": f"{result.sigma_min:.6g}"}
+    reasons = "; ".join(result.problems)
     if result.status == "fallback":
-        return "ERROR", "input bad or stale, fallback torque: " + "; ".join(result.problems), values
+        return "ERROR", "input bad or stale, fallback torque: " + reasons, values
     if result.status == "hold":
-        return "WARN", "sample rejected, holding last command: " + "; ".join(result.problems), values
+        return "WARN", "sample rejected, holding last command: " + reasons, values
     notes = [name for name, on in (("torque saturated", result.saturated),
                                    ("projection active", result.projection_active),
                                    ("J* near singular, damped", result.damped)) if on]
