@@ -71,15 +71,3 @@ def simulate_continuous(model, gains, trajectory, q0, qd0, state0, dt, steps, ob
         y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         t += dt
 
-
-def joints_seeing(model, pixels, q_start, iterations=50):
-    """Joint positions near ``q_start`` whose feature projects to ``pixels`` (Newton)."""
-    q = np.array(q_start, dtype=float)
-    for _ in range(iterations):
-        x, z = model.project(q)
-        err = pixels - x
-        if np.max(np.abs(err)) < 1e-9:
-            return q
-        J = model.true_image_jacobian(q, x) / np.repeat(z, 2)[:, None]
-        q = q + np.linalg.pinv(J) @ err
-    raise AssertionError(f"no joint solution seeing {pixels}")

@@ -246,8 +246,8 @@ def _require_finite(values, name, section):
 
 
 @dataclass(frozen=True, eq=False)
-class SimConfig:
-    """Validated parameters of the simulator (``sim_node``)."""
+class _ValidatedParams:
+    """A model plus a complete, validated parameter dict, read as attributes or items."""
 
     model: RobotCameraModel
     params: dict = field(repr=False)
@@ -257,6 +257,17 @@ class SimConfig:
             return self.__dict__["params"][name]
         except KeyError:
             raise AttributeError(name) from None
+
+    def __getitem__(self, name):
+        return self.params[name]
+
+    @property
+    def model_name(self):
+        return self.params["model"]
+
+
+class SimConfig(_ValidatedParams):
+    """Validated parameters of the simulator (``sim_node``)."""
 
     @classmethod
     def from_params(cls, params, section=SIM_SECTION):
@@ -276,10 +287,6 @@ class SimConfig:
         return cls(model, v)
 
     @property
-    def model_name(self):
-        return self.params["model"]
-
-    @property
     def substeps(self):
         return int(round(self.control_period / self.physics_dt))
 
@@ -292,21 +299,8 @@ def _check_image_bounds(v, section):
                           f"got {list(v['image_bounds'])}")
 
 
-@dataclass(frozen=True, eq=False)
-class ControllerConfig:
+class ControllerConfig(_ValidatedParams):
     """Validated parameters of the controller (``controller_node``)."""
-
-    model: RobotCameraModel
-    params: dict = field(repr=False)
-
-    def __getattr__(self, name):
-        try:
-            return self.__dict__["params"][name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-    def __getitem__(self, name):
-        return self.params[name]
 
     @classmethod
     def from_params(cls, params, section=CONTROLLER_SECTION):
