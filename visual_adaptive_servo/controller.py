@@ -149,6 +149,15 @@ class Projection:
                     act4 = True
         return a_perp_dot, a_z_dot, act1 or act3 or act4
 
+    def interior(self, state, H):
+        """Every estimate strictly inside its bounds and every z_hat_i above min_depth.
+
+        Then :meth:`clamp` changes nothing and no adaptation rate can be projected.
+        """
+        return (self._inside("a_z_perp", state.a_z_perp) and self._inside("a_z", state.a_z)
+                and self._inside("a_d", state.a_d)
+                and min(H.dot(state.a_z).tolist()) > self.min_depth)
+
     def clamp(self, state, H):
         """Return ``state`` with its estimates put back into the set after a finite step."""
         if (self._within("a_z_perp", state.a_z_perp) and self._within("a_z", state.a_z)
@@ -402,12 +411,13 @@ class AdaptiveVisualTracker:
     # -- the sample -------------------------------------------------------------
     def _check_feature(self, x):
         x = validate_vector("feature x", x, 2 * self.model.m)
-        u0, u1, v0, v1 = self.config.image_bounds
-        u, v = x[0::2], x[1::2]
-        outside = (u < u0) | (u > u1) | (v < v0) | (v > v1)
-        if outside.any():
-            raise InputError(f"feature x: point(s) {np.flatnonzero(outside).tolist()} outside the "
-                             f"image bounds {list(self.config.image_bounds)}: {x.tolist()}")
+        u0, u1, v0, v1 = self.config["image_bounds"].tolist()
+        pixels = x.tolist()
+        outside = [i for i, (u, v) in enumerate(zip(pixels[0::2], pixels[1::2]))
+                   if not (u0 <= u <= u1 and v0 <= v <= v1)]
+        if outside:
+            raise InputError(f"feature x: point(s) {outside} outside the "
+                             f"image bounds {list(self.config.image_bounds)}: {pixels}")
         return x
 
     def step(self, t, q, qd, x):
@@ -416,7 +426,7 @@ class AdaptiveVisualTracker:
         problems = []
         try:
             t = float(t)
-            if not np.isfinite(t):
+            if not isfinite(t):
                 raise InputError("time: not finite")
             if self.t_last is not None and t <= self.t_last:
                 raise InputError(f"time: {t} is not after the last sample {self.t_last}")
@@ -447,26 +457,30 @@ class AdaptiveVisualTracker:
             desired = BlendedStart(self.trajectory, x.copy(), t, blend)
         else:
             desired = self.desired
-            dt = min(t - self.t_last, self.config.max_dt)
+            dt = min(t - self.t_last, self.config["max_dt"])
             state = self.state.advanced(self.rates, dt)
-        H = None
-        if self.projection is not None:
-            H = self.model.kinematic_tensors(q, qd)[0]
-            state = self.projection.clamp(state, H)
+        tensors = self.model.kinematic_tensors(q, qd)
+        projection = self.projection
+        if projection is not None:
+            if projection.interior(state, tensors[0]):
+                # nothing to clamp and nothing the law's projection could block
+                projection = None
+            else:
+                state = projection.clamp(state, tensors[0])
 
         xd, xd_dot, xd_ddot = desired(t)
         try:
-            out = control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                              self.projection, self.config.min_singular_value)
+            out = self._law(state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection)
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
                                            "its pseudo-inverse; state kept)"])
-        if not (np.all(np.isfinite(out.tau)) and out.rates.is_finite() and state.is_finite()):
+        if not (all(map(isfinite, out.tau.tolist())) and out.rates.is_finite()
+                and state.is_finite()):
             return self._reject(t, q, qd, ["controller update is not finite (state kept)"])
 
-        limit = self.config.torque_limit
-        tau = np.clip(out.tau, -limit, limit)
-        saturated = bool(np.any(tau != out.tau))
+        limit = self.config["torque_limit"]
+        saturated = not all(-lim <= v <= lim for v, lim in zip(out.tau.tolist(), limit.tolist()))
+        tau = np.clip(out.tau, -limit, limit) if saturated else out.tau
         # commit
         if restarting and self.stale:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
@@ -479,6 +493,11 @@ class AdaptiveVisualTracker:
         self.last_tau, self.t_last_tau = tau, t
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
+
+    def _law(self, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
+        """The control law evaluated by :meth:`step` (baselines override this)."""
+        return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                           projection, self.config["min_singular_value"], tensors)
 
     def _reject(self, t, q, qd, problems):
         # log when the kind of problem changes, not at every sample of a long outage
