@@ -8,6 +8,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (backend first)
+import numpy as np  # noqa: E402
 
 
 def _save(fig, path):
@@ -20,17 +21,25 @@ def _save(fig, path):
 def plot_run(series, out_dir, labels):
     """Write the standard plots of one run; returns the list of PNG paths.
 
-    ``series`` maps names to arrays over time: t (N,), x, x_d, x_obs (N, 2m),
+    ``series`` maps names to arrays over time: t (N,), x (measured), x_true
+    (noiseless), x_d, x_obs (N, 2m),
     z, z_hat (N, m), tau (N, n), a_z_perp, a_z, a_d (N, p).
     ``labels`` maps a_z_perp / a_z / a_d to their entry names.
     """
     t = series["t"]
     paths = []
     err = series["x"] - series["x_d"]
+    err_true = series["x_true"] - series["x_d"]
+    noisy = bool(np.nanmax(np.abs(err - err_true)) > 1e-9) if len(t) else False
     fig, ax = plt.subplots(figsize=(7, 4))
     for i in range(err.shape[1]):
         axis, point = "uv"[i % 2], i // 2 + 1
-        ax.plot(t, err[:, i], label=f"{axis}{point} - {axis}d{point}")
+        name = f"{axis}{point} - {axis}d{point}"
+        if noisy:
+            line, = ax.plot(t, err[:, i], lw=0.5, alpha=0.35, label=f"{name} measured")
+            ax.plot(t, err_true[:, i], color=line.get_color(), label=f"{name} true")
+        else:
+            ax.plot(t, err[:, i], label=name)
     ax.set(xlabel="time [s]", ylabel="image error [px]",
            title="Image-space tracking error x - x_d (paper Fig. 2)")
     ax.grid(True)
@@ -68,10 +77,15 @@ def plot_run(series, out_dir, labels):
 
     fig, ax = plt.subplots(figsize=(6, 6))
     for i in range(series["x"].shape[1] // 2):
-        ax.plot(series["x_d"][:, 2 * i], series["x_d"][:, 2 * i + 1], "k--", lw=1, label="x_d")
-        ax.plot(series["x_obs"][:, 2 * i], series["x_obs"][:, 2 * i + 1], lw=1, label="x_o")
-        ax.plot(series["x"][:, 2 * i], series["x"][:, 2 * i + 1], lw=1, label="x")
-        ax.plot(series["x"][0, 2 * i], series["x"][0, 2 * i + 1], "go", label="start")
+        u, v = 2 * i, 2 * i + 1
+        ax.plot(series["x"][:, u], series["x"][:, v], ".", ms=1, alpha=0.3, color="tab:orange",
+                label="x measured")
+        ax.plot(series["x_true"][:, u], series["x_true"][:, v], lw=1, color="tab:orange",
+                label="x")
+        ax.plot(series["x_obs"][:, u], series["x_obs"][:, v], lw=1, color="tab:blue",
+                label="x_o")
+        ax.plot(series["x_d"][:, u], series["x_d"][:, v], "k--", lw=1, label="x_d")
+        ax.plot(series["x_true"][0, u], series["x_true"][0, v], "go", label="start")
     ax.set(xlabel="u [px]", ylabel="v [px]", title="Image-plane path")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True)
