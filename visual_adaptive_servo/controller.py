@@ -223,26 +223,27 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     e_obs = x_obs - xd                                # x_o - x_d
     dx_obs = x_obs - x                                # Delta x_o
     dx = x - xd                                       # Delta x
-    # J_hat(q, x) q_dot, using J_z_hat q_dot = hat{Z_dot}
-    Jq = J_perp.dot(qd) - x * Zh_rate
-    # eq (10): the observer, x_o_dot = x_obs_model - alpha Delta x_o
-    x_obs_model = (Jq - 0.5 * Zh_rate * e_obs) / Zh
+    u = 0.5 * (x_obs + xd)                            # where J* is evaluated, eq (18)
+    x_mid = dx + u                                    # x + (x_o - x_d)/2
+    # eq (10): the observer, x_o_dot = x_obs_model - alpha Delta x_o with
+    # x_obs_model = Z^-1 (J_hat(q, x) q_dot - 1/2 Z_dot (x_o - x_d)), where
+    # J_hat(q, x) q_dot = J_perp q_dot - X hat{Z_dot} since J_z_hat q_dot = hat{Z_dot}
+    x_obs_model = (J_perp.dot(qd) - Zh_rate * x_mid) / Zh
     x_obs_dot = x_obs_model - gains.alpha * dx_obs
     x_r_dot = xd_dot - gains.gamma * e_obs
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
 
     # eq (24)
-    dx_minus_dx_obs = dx - dx_obs
-    a_perp_dot = gains.Gamma_z_perp * dx_minus_dx_obs.dot(model.Y_z_perp(W, qd))
+    a_perp_dot = gains.Gamma_z_perp * (dx - dx_obs).dot(model.Y_z_perp(W, qd))
     # eq (25): -Gamma_z (Y_z**^T Delta x - Y_z*^T Delta x_o) with
     #   Y_z*  = Y_z(q, Z^-1 J q_dot - 1/2 Z^-1 Z_dot e_obs) + Y_z_bar(q, q_dot, x + e_obs/2)
-    #   Y_z** = Y_z_bar(q, q_dot, (x_o + x_d)/2) + Y_z(q, x_r_dot).
-    # Y_z(H, psi)^T v = H^T (psi_i . v_i)_i, i.e. v.psi against H with its rows
-    # repeated per coordinate, so neither regressor is formed.  With u = (x_o + x_d)/2,
-    # x + e_obs/2 = Delta x + u.
-    u = 0.5 * (x_obs + xd)
+    #         = Y_z(q, x_obs_model) + Y_z_bar(q, q_dot, x_mid)
+    #   Y_z** = Y_z_bar(q, q_dot, (x_o + x_d)/2) + Y_z(q, x_r_dot)
+    #         = Y_z_bar(q, q_dot, u) + Y_z(q, x_r_dot)
+    # Y_z(H, psi)^T v = H^T (psi_i . v_i)_i, i.e. (psi * v) against H with its rows
+    # repeated per coordinate, so neither regressor is formed.
     w_H = x_obs_model * dx_obs - x_r_dot * dx
-    w_H_rate = dx * dx_obs - u * dx_minus_dx_obs
+    w_H_rate = x_mid * dx_obs - u * dx
     a_z_dot = gains.Gamma_z * (w_H.dot(H.repeat(2, axis=0))
                                + w_H_rate.dot(H_rate.repeat(2, axis=0)))
 
@@ -251,8 +252,8 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         a_perp_dot, a_z_dot, projection_active = projection.kinematic_rates(
             state, a_perp_dot, a_z_dot, H, gains.Gamma_z)
 
-    # eq (18): J* = J_hat(q, (x_o + x_d)/2) and its TOTAL time derivative, through
-    # q_dot (the *_rate tensors), the adaptation rates and u_dot
+    # eq (18): J* = J_hat(q, u) and its TOTAL time derivative, through q_dot (the
+    # *_rate tensors), the adaptation rates and u_dot
     u_col = u[:, None]
     u_dot = 0.5 * (x_obs_dot + xd_dot)
     J_star = J_perp - u_col * J_z

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import cos, sin
 
 import numpy as np
 
@@ -20,14 +21,17 @@ class SinusoidTrajectory:
     a_sin: np.ndarray
     omega: float
 
+    def __post_init__(self):
+        # rows a_cos, a_sin: one product gives x_d and both derivatives (called every sample)
+        object.__setattr__(self, "_amplitudes", np.array([self.a_cos, self.a_sin], dtype=float))
+
     def __call__(self, t):
-        """Return (x_d, x_d_dot, x_d_ddot) at time t, each (2m,)."""
-        c, s = np.cos(self.omega * t), np.sin(self.omega * t)
+        """Return (x_d, x_d_dot, x_d_ddot) at time t (a number), each (2m,)."""
         w = self.omega
-        x = self.offset + self.a_cos * c + self.a_sin * s
-        xd = w * (self.a_sin * c - self.a_cos * s)
-        xdd = -w * w * (self.a_cos * c + self.a_sin * s)
-        return x, xd, xdd
+        c, s = cos(w * t), sin(w * t)
+        x, xd, xdd = np.array([[c, s], [-w * s, w * c], [-w * w * c, -w * w * s]]).dot(
+            self._amplitudes)
+        return x + self.offset, xd, xdd
 
 
 def quintic_blend(tau):
