@@ -87,7 +87,8 @@ class ArmPlant:
     def joint_state(self):
         """(q, q_dot) as float64 arrays (n,)."""
         states = pybullet.getJointStates(self.body, self.joints, physicsClientId=self.client)
-        return (np.array([s[0] for s in states]), np.array([s[1] for s in states]))
+        q, qd = np.array(list(zip(*states))[:2])
+        return q, qd
 
     def tip_position(self):
         """World position of the feature point (3,)."""
@@ -97,7 +98,7 @@ class ArmPlant:
 
     def advance(self, tau, substeps):
         """Hold ``tau`` for ``substeps`` physics steps (zero-order hold)."""
-        forces = [float(f) for f in tau]
+        forces = np.asarray(tau, dtype=float).tolist()
         for _ in range(substeps):
             pybullet.setJointMotorControlArray(self.body, self.joints, pybullet.TORQUE_CONTROL,
                                                forces=forces, physicsClientId=self.client)
@@ -140,10 +141,14 @@ class PinholeCamera:
 
     def project(self, points):
         """Pixels (2m,) and depths (m,) of base-frame points (m, 3)."""
-        pc = (np.asarray(points) - self.origin) @ self.rotation.T
+        pc = (np.asarray(points) - self.origin).dot(self.rotation.T)
         z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        if min(z.tolist()) > 0.0:
             uv = self.focal_length * self.scale * pc[:, :2] / z[:, None]
+        else:
+            # a point on or behind the camera plane: inf/NaN pixels, marked not visible
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = self.focal_length * self.scale * pc[:, :2] / z[:, None]
         return uv.reshape(-1), z
 
     @classmethod
@@ -178,8 +183,11 @@ class FeatureCamera:
 
     def capture(self, stamp, points):
         """Capture the points now; return the frame due for delivery now."""
-        pixels, depth = self.camera.project(points)
-        visible = bool(np.all(depth > 0.0))
+        return self.capture_projected(stamp, *self.camera.project(points))
+
+    def capture_projected(self, stamp, pixels, depth):
+        """:meth:`capture` with the exact projection of the points already done."""
+        visible = min(depth.tolist()) > 0.0
         if self.noise > 0.0:
             pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
         self.buffer.append(CameraFrame(stamp, pixels, depth, visible))

@@ -10,6 +10,7 @@ applied instead, with the reason returned to the caller.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import isfinite
 
 import numpy as np
 
@@ -54,26 +55,30 @@ class Simulator:
         self.plant.reset(config.initial_positions, config.initial_velocities)
         self.tau = np.zeros(self.model.n)
         self.step_index = 0
+        # read once: SimConfig attribute access goes through __getattr__ (every period)
+        self._period = config.control_period
+        self._substeps = config.substeps
+        self._delay_frames = config.camera_delay_frames
 
     @property
     def t(self):
-        return self.step_index * self.config.control_period
+        return self.step_index * self._period
 
     def measure(self):
         """Sensors now; a frame is delivered once the camera delay has passed."""
         q, qd = self.plant.joint_state()
-        tip = self.plant.tip_position()[None, :]
-        frame = self.feature_camera.capture(self.t, tip)
-        true_pixels, true_depth = self.camera.project(tip)
+        t = self.t
+        true_pixels, true_depth = self.camera.project(self.plant.tip_position()[None, :])
+        frame = self.feature_camera.capture_projected(t, true_pixels, true_depth)
         problems = []
         pixels, stamp = None, None
-        if self.step_index >= self.config.camera_delay_frames:
+        if self.step_index >= self._delay_frames:
             if frame.visible:
                 pixels, stamp = frame.pixels, frame.stamp
             else:
                 problems.append(f"feature behind the camera at t={frame.stamp:.3f} "
                                 f"(depth {frame.depth.tolist()})")
-        return Measurement(self.t, q, qd, self.tau.copy(), stamp, pixels, true_depth,
+        return Measurement(t, q, qd, self.tau.copy(), stamp, pixels, true_depth,
                            true_pixels, tuple(problems))
 
     def apply(self, tau):
@@ -82,10 +87,10 @@ class Simulator:
         tau = np.asarray(tau, dtype=float).reshape(-1)
         if tau.shape != (self.model.n,):
             problem = f"command: expected {self.model.n} torques, got {tau.shape[0]}"
-        elif not np.all(np.isfinite(tau)):
+        elif not all(map(isfinite, tau.tolist())):
             problem = f"command: contains NaN or inf: {tau.tolist()}"
         self.tau = np.zeros(self.model.n) if problem else tau
-        self.plant.advance(self.tau, self.config.substeps)
+        self.plant.advance(self.tau, self._substeps)
         self.step_index += 1
         return problem
 
