@@ -208,7 +208,9 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     estimated Jacobian kept as its two parts ``J_z_perp`` and ``U J_z`` of
     eq (a1), and the regressors Y_z of eq (25) contracted without being formed.
     """
-    H, dH, dH_rate, W, W_rate = model.kinematic_tensors(q, qd) if tensors is None else tensors
+    if tensors is None:
+        tensors = model.kinematic_tensors(q, qd)
+    H, dH, dH_rate, W, W_rate = tensors
     a_z_perp, a_z = state.a_z_perp, state.a_z
     H_rate = qd.dot(dH)                               # (m, p_z), d/dt H along q_dot
     z_hat = H.dot(a_z)                                # (m,)
@@ -247,6 +249,43 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     a_z_dot = gains.Gamma_z * (w_H.dot(H.repeat(2, axis=0))
                                + w_H_rate.dot(H_rate.repeat(2, axis=0)))
 
+    u_dot = 0.5 * (x_obs_dot + xd_dot)
+    return joint_space_law(model, gains, state, q, qd, tensors, (J_perp, J_z),
+                           (z_hat, z_rate_hat, Zh), (u, u_dot, x_r_dot, x_r_ddot),
+                           (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value)
+
+
+def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, references,
+                    image_rates, projection, min_singular_value):
+    """Eqs (18)-(23) from the image-space references: the second half of :func:`control_law`.
+
+    Shared with the velocity-based baseline, which feeds it measured instead of
+    observed image quantities.
+
+    Parameters
+    ----------
+    tensors : tuple
+        ``model.kinematic_tensors(q, qd)``.
+    jacobian : (J_perp, J_z)
+        The two parts of J_hat of eq (a1), (2m, n) each (rows of J_z per coordinate).
+    depth : (z_hat, z_rate_hat, Zh)
+        Estimated depths (m,), their model rate (m,), the depths per coordinate (2m,).
+    references : (u, u_dot, x_r_dot, x_r_ddot)
+        Where J* is evaluated and its rate, and the image reference velocity and
+        acceleration, (2m,) each.
+    image_rates : (x_obs_dot, a_perp_dot, a_z_dot)
+        Observer rate (passed through) and the unprojected rates of eqs (24), (25).
+
+    Returns
+    -------
+    LawOutput
+    """
+    H, dH, dH_rate, W, W_rate = tensors
+    J_perp, J_z = jacobian
+    z_hat, z_rate_hat, Zh = depth
+    u, u_dot, x_r_dot, x_r_ddot = references
+    x_obs_dot, a_perp_dot, a_z_dot = image_rates
+    a_z_perp, a_z = state.a_z_perp, state.a_z
     projection_active = False
     if projection is not None:
         a_perp_dot, a_z_dot, projection_active = projection.kinematic_rates(
@@ -255,7 +294,6 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     # eq (18): J* = J_hat(q, u) and its TOTAL time derivative, through q_dot (the
     # *_rate tensors), the adaptation rates and u_dot
     u_col = u[:, None]
-    u_dot = 0.5 * (x_obs_dot + xd_dot)
     J_star = J_perp - u_col * J_z
     J_z_dot = (dH_rate.dot(a_z) + dH.dot(a_z_dot)).repeat(2, axis=0)
     J_star_dot = (W_rate.dot(a_z_perp) + W.dot(a_perp_dot)
