@@ -509,7 +509,7 @@ class AdaptiveVisualTracker:
 
         xd, xd_dot, xd_ddot = desired(t)
         try:
-            out = self._law(state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection)
+            out = self._law(t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection)
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
                                            "its pseudo-inverse; state kept)"])
@@ -533,8 +533,12 @@ class AdaptiveVisualTracker:
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
 
-    def _law(self, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
-        """The control law evaluated by :meth:`step` (baselines override this)."""
+    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
+        """The control law evaluated by :meth:`step` at time ``t`` (baselines override this).
+
+        ``state`` is the integrated, clamped state; ``tensors`` the model's kinematic
+        tensors at (q, q_dot); ``projection`` None when no bound is near.
+        """
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
                            projection, self.config["min_singular_value"], tensors)
 
