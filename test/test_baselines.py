@@ -92,3 +92,21 @@ def test_velocity_baseline_runs_the_clean_reference_scenario(scenario, tmp_path)
     assert not summary["diverged"]
     assert summary["rejected"] == 0
     assert summary["final_rms_true_error_px"] < 0.2
+
+
+def test_compare_figures_on_a_known_signal():
+    from visual_adaptive_servo.compare import run_figures
+
+    period = 0.01
+    t = np.arange(0.0, 10.0, period)
+    x_d = np.zeros((len(t), 2))
+    x_true = np.column_stack([np.where(t < 5.0, 100.0, 3.0), np.full(len(t), 4.0)])  # |e| = 5
+    tau = np.column_stack([np.sin(t), np.zeros(len(t)), np.zeros(len(t))])
+    fig = run_figures(t, x_true, x_d, tau, period, transient=5.0)
+    assert fig["rms_error_px"] == pytest.approx(5.0)
+    assert fig["max_error_px"] == pytest.approx(5.0)
+    window = t >= 5.0 - 1e-9
+    assert fig["torque_rms"] == pytest.approx(np.sqrt(np.mean(np.sin(t[window]) ** 2)))
+    # the rate of sin is cos: RMS of cos over the same window, to the difference quotient
+    assert fig["torque_rate_rms"] == pytest.approx(np.sqrt(np.mean(np.cos(t[window]) ** 2)),
+                                                   rel=1e-2)

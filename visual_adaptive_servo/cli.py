@@ -12,6 +12,7 @@ import json
 import logging
 import sys
 
+from .compare import add_parser as add_compare_parser
 from .config import ConfigError, load_scenario
 
 
@@ -106,6 +107,7 @@ def build_parser():
     rob.add_argument("--out", required=True, help="output folder (created)")
     rob.add_argument("--duration", type=float, default=10.0, help="simulated seconds per case")
     rob.set_defaults(func=cmd_robustness)
+    add_compare_parser(sub)
     return parser
 
 
