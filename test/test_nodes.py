@@ -1,0 +1,236 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The two ROS 2 nodes closing the loop through real rclpy topics.
+
+Needs a sourced ROS 2 Jazzy (skipped otherwise).  Each test runs in its own
+rclpy context on a private ROS domain, with the nodes in one
+SingleThreadedExecutor.  The oracle for the lockstep loop is the in-process
+runner: both step the same simulator and controller in the same order, so
+the tracking error through ROS must match the one of ``vas run`` (up to the
+float32 of geometry_msgs/Point32 that carries the pixels).
+"""
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)")
+
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from sim_bridge.sim_node import SimNode  # noqa: E402
+from sim_bridge.simulator import Simulator  # noqa: E402
+from visual_adaptive_servo import messages as m  # noqa: E402
+from visual_adaptive_servo.config import (  # noqa: E402
+    CONTROLLER_PARAMS,
+    CONTROLLER_SECTION,
+    SIM_PARAMS,
+    SIM_SECTION,
+    ConfigError,
+    ControllerConfig,
+    SimConfig,
+    read_param_file,
+)
+from visual_adaptive_servo.controller import AdaptiveVisualTracker  # noqa: E402
+from visual_adaptive_servo.controller_node import ControllerNode  # noqa: E402
+from visual_adaptive_servo.ros_params import to_ros  # noqa: E402
+
+CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
+                      "paper_3dof.yaml")
+DOMAIN_ID = 100 + os.getpid() % 100
+
+
+@pytest.fixture()
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def _sections(**changes):
+    """The parameter file's sections with ``section.name=value`` changes applied."""
+    sections = read_param_file(CONFIG)
+    for key, value in changes.items():
+        section, name = key.split("__")
+        sections[section][name.replace("_DOT_", ".")] = value
+    return sections
+
+
+def _overrides(specs, params):
+    by_name = {spec.name: spec for spec in specs}
+    return [Parameter(name, value=to_ros(by_name[name], value)) for name, value in params.items()]
+
+
+def _make_nodes(context, sections):
+    sim = SimNode(context=context, parameter_overrides=_overrides(SIM_PARAMS,
+                                                                  sections[SIM_SECTION]))
+    ctl = ControllerNode(context=context, parameter_overrides=_overrides(
+        CONTROLLER_PARAMS, sections[CONTROLLER_SECTION]) + [Parameter("use_sim_time",
+                                                                      value=True)])
+    return sim, ctl
+
+
+class Probe:
+    """A third node recording what the controller publishes."""
+
+    def __init__(self, context):
+        self.node = rclpy.create_node("probe", context=context)
+        msgs = m.rclpy_messages()
+        self.errors, self.commands, self.diagnostics = {}, [], []
+        self.node.create_subscription(msgs.PolygonStamped, "/controller_node/tracking_error",
+                                      self._on_error, 100)
+        self.node.create_subscription(msgs.Float64MultiArray, "/effort_controller/commands",
+                                      lambda msg: self.commands.append(np.array(msg.data)), 100)
+        self.node.create_subscription(msgs.DiagnosticArray, "/diagnostics",
+                                      lambda msg: self.diagnostics.extend(msg.status), 100)
+
+    def _on_error(self, msg):
+        t, err = m.features_from_msg(msg)
+        self.errors[round(t, 6)] = err
+
+
+def _spin(context, nodes, until, timeout):
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    deadline = time.monotonic() + timeout
+    while not until() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    executor.shutdown()
+
+
+def _reference_errors(sections, duration):
+    """Tracking error x - x_d of the in-process loop, by time (what vas run computes)."""
+    sim = Simulator(SimConfig.from_params(sections[SIM_SECTION]))
+    ctl = AdaptiveVisualTracker(ControllerConfig.from_params(sections[CONTROLLER_SECTION]))
+    errors = {}
+    try:
+        for _ in range(round(duration / sim.config.control_period)):
+            meas = sim.measure()
+            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
+            errors[round(meas.t, 6)] = res.error
+            sim.apply(res.tau)
+    finally:
+        sim.close()
+    return errors
+
+
+def test_lockstep_loop_tracks_like_the_in_process_runner(context):
+    duration = 2.0
+    sections = _sections(sim_node__duration=duration)
+    sim, ctl = _make_nodes(context, sections)
+    probe = Probe(context)
+    try:
+        _spin(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=120.0)
+        assert sim.finished.done(), "the lockstep loop did not reach its duration in 120 s"
+        # let the last messages arrive
+        _spin(context, [probe.node], lambda: False, timeout=0.3)
+        steps = round(duration / 0.005)
+        assert sim.counters == {"steps": steps, "command_timeouts": 0, "refused_commands": 0}
+        assert ctl.samples == steps
+        assert len(probe.commands) == steps
+        tau = np.array(probe.commands)
+        assert np.all(np.isfinite(tau)) and np.max(np.abs(tau)) > 1.0
+        assert len(probe.errors) == steps
+        reference = _reference_errors(sections, duration)
+        times = sorted(reference)
+        ros_err = np.linalg.norm([probe.errors[t] for t in times], axis=1)
+        ref_err = np.linalg.norm([reference[t] for t in times], axis=1)
+        np.testing.assert_allclose(ros_err, ref_err, atol=1e-3)
+        assert np.max(ros_err) < 3.0
+        assert np.max(ros_err[times.index(1.0):]) < 1.0
+        levels = {s.name: s.level for s in probe.diagnostics}
+        assert levels.get("controller_node") in (0, b"\x00")
+        assert levels.get("sim_node") in (0, b"\x00")
+    finally:
+        probe.node.destroy_node()
+        ctl.destroy_node()
+        sim.destroy_node()
+
+
+def test_runtime_gain_is_applied_and_invalid_changes_are_refused(context):
+    ctl = ControllerNode(context=context, parameter_overrides=_overrides(
+        CONTROLLER_PARAMS, read_param_file(CONFIG)[CONTROLLER_SECTION]))
+    try:
+        ok = ctl.set_parameters([Parameter("K", value=[0.002, 0.003])])[0]
+        assert ok.successful, ok.reason
+        np.testing.assert_array_equal(ctl.tracker.gains.K, [0.002, 0.003])
+
+        bad = ctl.set_parameters([Parameter("K", value=[0.002, 0.0])])[0]
+        assert not bad.successful
+        assert "controller_node.K: every entry must be > 0" in bad.reason
+        np.testing.assert_array_equal(ctl.tracker.gains.K, [0.002, 0.003])
+        assert list(ctl.get_parameter("K").value) == [0.002, 0.003]
+
+        fixed = ctl.set_parameters([Parameter("alpha", value=1.0)])[0]
+        assert not fixed.successful and "read-only" in fixed.reason
+        assert ctl.tracker.gains.alpha == 10.0
+
+        limit = ctl.set_parameters([Parameter("torque_limit", value=[100.0, 100.0])])[0]
+        assert not limit.successful and "torque_limit: needs 3 values" in limit.reason
+    finally:
+        ctl.destroy_node()
+
+
+@pytest.mark.parametrize("name, value, match", [
+    ("gamma", 40.0, r"alpha: Theorem 1 requires alpha > gamma/3"),
+    ("alpha", 10, r"controller_node\.alpha: .*type"),
+    ("model", "scara", r"controller_node\.model"),
+    ("sample_time", -1.0, r"controller_node\.sample_time: .*out of range"),
+])
+def test_invalid_configuration_is_refused_at_start_up(context, name, value, match):
+    with pytest.raises(ConfigError, match=match):
+        ControllerNode(context=context, parameter_overrides=[Parameter(name, value=value)])
+
+
+def test_unconvertible_joint_state_is_a_rejected_sample_not_a_crash(context):
+    ctl = ControllerNode(context=context)
+    probe = Probe(context)
+    msgs = m.rclpy_messages()
+    pub_js = probe.node.create_publisher(msgs.JointState, "/joint_states", 10)
+    pub_x = probe.node.create_publisher(msgs.PolygonStamped, "/camera/features", 10)
+    try:
+        _spin(context, [ctl, probe.node],
+              lambda: pub_js.get_subscription_count() and pub_x.get_subscription_count(), 10.0)
+        pub_js.publish(m.joint_state_to_msg(msgs, 0.5, ["a", "b", "c"], [0.0] * 3, [0.0] * 3,
+                                            [0.0] * 3))
+        pub_x.publish(m.features_to_msg(msgs, 0.5, [65.0, 65.0]))
+        _spin(context, [ctl, probe.node], lambda: probe.commands and probe.diagnostics, 10.0)
+        assert ctl.samples == 1
+        np.testing.assert_array_equal(probe.commands[0], [0.0, 0.0, 0.0])
+        status = probe.diagnostics[0]
+        assert status.level in (2, b"\x02") and "joint positions q: missing" in status.message
+    finally:
+        probe.node.destroy_node()
+        ctl.destroy_node()
+
+
+def test_realtime_mode_runs_on_the_wall_clock(context):
+    sections = _sections(sim_node__duration=0.5, sim_node__timing_mode="realtime",
+                         controller_node__timing_mode="realtime")
+    sim, ctl = _make_nodes(context, sections)
+    try:
+        _spin(context, [sim, ctl], lambda: sim.finished.done(), timeout=30.0)
+        assert sim.finished.done()
+        assert sim.counters["steps"] == 100
+        assert ctl.samples > 50    # best effort: most samples arrive and are answered
+        assert sim.sim.t == pytest.approx(0.5)
+    finally:
+        ctl.destroy_node()
+        sim.destroy_node()

@@ -1,0 +1,106 @@
+"""Declaring a parameter schema (:class:`config.ParamSpec`) on an rclpy node.
+
+Used by both nodes.  ``model`` is declared first, because the defaults of the
+others (list lengths) depend on the model it names.  Every parameter gets a
+``ParameterDescriptor`` with the schema's description, a range where the
+schema has bounds (scalars only: ROS ranges do not apply to arrays, so the
+bounds of a list are stated in its description and checked by
+``from_params``), and ``read_only`` unless the schema marks it ``runtime``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+from rclpy.exceptions import ParameterException
+
+from .config import ConfigError
+from .model import make_model
+
+PARAMETER_TYPES = {
+    "float": ParameterType.PARAMETER_DOUBLE,
+    "int": ParameterType.PARAMETER_INTEGER,
+    "bool": ParameterType.PARAMETER_BOOL,
+    "str": ParameterType.PARAMETER_STRING,
+    "float_list": ParameterType.PARAMETER_DOUBLE_ARRAY,
+    "str_list": ParameterType.PARAMETER_STRING_ARRAY,
+}
+INT64_MAX = 2**63 - 1
+
+
+def descriptor(spec, read_only=None):
+    """ParameterDescriptor of one ParamSpec (type, description, range, read_only)."""
+    read_only = (not spec.runtime) if read_only is None else read_only
+    text = spec.description
+    if spec.kind == "float_list" and (spec.low is not None or spec.high is not None):
+        low = "-inf" if spec.low is None else f"{spec.low:g}"
+        high = "inf" if spec.high is None else f"{spec.high:g}"
+        text = f"{text} Every entry in [{low}, {high}]."
+    desc = ParameterDescriptor(name=spec.name, type=PARAMETER_TYPES[spec.kind],
+                               description=text, read_only=read_only)
+    if spec.low is None and spec.high is None:
+        return desc
+    if spec.kind == "float":
+        desc.floating_point_range = [FloatingPointRange(
+            from_value=-math.inf if spec.low is None else float(spec.low),
+            to_value=math.inf if spec.high is None else float(spec.high), step=0.0)]
+    elif spec.kind == "int":
+        desc.integer_range = [IntegerRange(
+            from_value=-INT64_MAX if spec.low is None else int(spec.low),
+            to_value=INT64_MAX if spec.high is None else int(spec.high), step=0)]
+    return desc
+
+
+def to_ros(spec, value):
+    """A schema value as the Python type rclpy infers the declared type from."""
+    if spec.kind == "float":
+        return float(value)
+    if spec.kind == "int":
+        return int(value)
+    if spec.kind == "float_list":
+        return [float(v) for v in value]
+    if spec.kind == "str_list":
+        return [str(v) for v in value]
+    return value
+
+
+def from_ros(spec, value):
+    """An rclpy parameter value (arrays come as array.array) as the schema expects it."""
+    if spec.kind in ("float_list", "str_list"):
+        return list(value)
+    return value
+
+
+def declare_schema(node, specs, section):
+    """Declare ``specs`` on ``node``; return the flat {name: value} it ends up with.
+
+    Raises ConfigError (naming ``section.parameter`` and the rule) when a
+    parameter override has the wrong type, is out of range, or names an
+    unknown model.
+    """
+    by_name = {spec.name: spec for spec in specs}
+    model_spec = by_name["model"]
+    try:
+        name = node.declare_parameter("model", model_spec.default, descriptor(model_spec)).value
+        model = make_model(name)
+    except ValueError as exc:
+        raise ConfigError(f"{section}.{exc}") from None
+    except ParameterException as exc:
+        raise ConfigError(f"{section}.model: {exc}") from None
+    values = {"model": name}
+    for spec in specs:
+        if spec.name == "model":
+            continue
+        try:
+            param = node.declare_parameter(spec.name, to_ros(spec, spec.default_for(model)),
+                                           descriptor(spec))
+        except ParameterException as exc:
+            raise ConfigError(f"{section}.{spec.name}: {exc}") from None
+        values[spec.name] = from_ros(spec, param.value)
+    return values
