@@ -1,0 +1,83 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""launch_testing: the installed launch file runs the loop and ends cleanly.
+
+``launch/paper_3dof.launch.py`` is started with a 2 s scenario on a private
+ROS domain; the test waits for the simulator to report the duration reached,
+and after shutdown every process must have exited with status 0.  Skipped
+without launch_testing or when the package is not installed (colcon build).
+"""
+
+import os
+import tempfile
+import unittest
+
+import pytest
+
+pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
+
+import launch_testing.actions
+import launch_testing.asserts
+import yaml
+from ament_index_python.packages import (
+    PackageNotFoundError,
+    get_package_share_directory,
+)
+from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+
+from launch import LaunchDescription
+
+PACKAGE = "visual_adaptive_servo"
+try:
+    SHARE = get_package_share_directory(PACKAGE)
+except PackageNotFoundError:
+    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
+                allow_module_level=True)
+
+
+def _short_params_file():
+    with open(os.path.join(SHARE, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
+        params = yaml.safe_load(handle)
+    params["sim_node"]["ros__parameters"]["duration"] = 2.0
+    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False,
+                                     encoding="utf-8") as handle:
+        yaml.safe_dump(params, handle)
+    return handle.name
+
+
+@pytest.mark.launch_test
+def generate_test_description():
+    return LaunchDescription([
+        SetEnvironmentVariable("ROS_DOMAIN_ID", str(150 + os.getpid() % 50)),
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(os.path.join(SHARE, "launch", "paper_3dof.launch.py")),
+            launch_arguments={"params_file": _short_params_file()}.items()),
+        launch_testing.actions.ReadyToTest(),
+    ])
+
+
+class TestLoop(unittest.TestCase):
+
+    def test_simulator_reaches_its_duration(self, proc_output):
+        proc_output.assertWaitFor("controller connected: simulation starts", timeout=60)
+        proc_output.assertWaitFor("duration 2.0 s reached after 400 steps", timeout=120)
+
+
+@launch_testing.post_shutdown_test()
+class TestShutdown(unittest.TestCase):
+
+    def test_every_process_exits_cleanly(self, proc_info):
+        launch_testing.asserts.assertExitCodes(proc_info)
