@@ -104,4 +104,3 @@ def render_camera_view(client, camera, bounds, width, height, markers=()):
         for col, row in zip(cols, rows):
             draw_marker(rgb, col, row, color, shape=shape)
     return rgb
-

@@ -1,0 +1,31 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""ament_copyright: every source file carries the Apache-2.0 header."""
+
+from pathlib import Path
+
+import pytest
+
+main = pytest.importorskip("ament_copyright.main",
+                           reason="ament_copyright (ROS 2) not installed").main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.copyright
+@pytest.mark.linter
+def test_copyright():
+    rc = main(argv=[str(ROOT)])
+    assert rc == 0, "Found errors"
