@@ -62,7 +62,7 @@ def test_projection_shortcuts_change_nothing(model, rng):
               np.array([10.0, 10.0, 50.0]), np.full(8, -50.0), np.full(8, 50.0), 0.5)
     fast, full = Projection(*bounds), FullProjection(*bounds)
     gamma_z = np.full(3, 0.2)
-    shortcuts = {"rates": 0, "clamp": 0}
+    shortcuts = {"rates": 0, "clamp": 0, "interior": 0}
     for _ in range(500):
         # estimates inside, on and outside the bounds; depths above and below min_depth
         if rng.random() < 0.5:
@@ -83,9 +83,19 @@ def test_projection_shortcuts_change_nothing(model, rng):
         shortcuts["rates"] += fast._inside("a_z", a_z) and not full._inside("a_z", a_z)
         got, ref = fast.clamp(state, H), full.clamp(state, H)
         shortcuts["clamp"] += got is state
+        if fast.interior(state, H):
+            # step() then skips the clamp and hands the law no projection at all
+            assert got is state
+            for name in ("a_z_perp", "a_z", "a_d"):
+                np.testing.assert_array_equal(getattr(ref, name), getattr(state, name))
+            rates = full.kinematic_rates(state, r_perp, r_z, H, gamma_z)
+            np.testing.assert_array_equal(rates[0], r_perp)
+            np.testing.assert_array_equal(rates[1], r_z)
+            assert not rates[2] and not full.dynamic_rate(a_d, r_d)[1]
+            shortcuts["interior"] += 1
         for name in ("a_z_perp", "a_z", "a_d"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
-    assert 50 < shortcuts["clamp"] < 450 and 50 < shortcuts["rates"] < 450, shortcuts
+    assert all(50 < n < 450 for n in shortcuts.values()), shortcuts
 
 
 def test_control_law_with_precomputed_tensors_is_the_same(model, scenario, rng):

@@ -59,8 +59,8 @@ class EstimatorState:
 
     def is_finite(self):
         # math.isfinite over Python floats: np.all(np.isfinite(.)) costs ~3 us per tiny array
-        return all(isfinite(v) for a in (self.x_obs, self.a_z_perp, self.a_z, self.a_d)
-                   for v in a.tolist())
+        return all(map(isfinite, self.x_obs.tolist() + self.a_z_perp.tolist()
+                       + self.a_z.tolist() + self.a_d.tolist()))
 
 
 @dataclass(frozen=True)
@@ -100,10 +100,13 @@ class Projection:
     def __post_init__(self):
         # the bounds as Python floats: the per-sample "nothing to project" test is
         # several times cheaper on lists than on arrays of a few elements
-        object.__setattr__(self, "_bounds", {
-            name: (np.asarray(getattr(self, name + "_min"), dtype=float).tolist(),
-                   np.asarray(getattr(self, name + "_max"), dtype=float).tolist())
-            for name in ("a_z_perp", "a_z", "a_d")})
+        bounds = {name: (np.asarray(getattr(self, name + "_min"), dtype=float).tolist(),
+                         np.asarray(getattr(self, name + "_max"), dtype=float).tolist())
+                  for name in ("a_z_perp", "a_z", "a_d")}
+        object.__setattr__(self, "_bounds", bounds)
+        # all three boxes in the order of interior()'s flat list of estimates
+        object.__setattr__(self, "_all_bounds", tuple(
+            bounds["a_z_perp"][k] + bounds["a_z"][k] + bounds["a_d"][k] for k in (0, 1)))
 
     def _inside(self, name, a):
         """Every element of ``a`` strictly inside its bounds: no rate can be blocked."""
@@ -154,8 +157,9 @@ class Projection:
 
         Then :meth:`clamp` changes nothing and no adaptation rate can be projected.
         """
-        return (self._inside("a_z_perp", state.a_z_perp) and self._inside("a_z", state.a_z)
-                and self._inside("a_d", state.a_d)
+        lo, hi = self._all_bounds
+        estimates = state.a_z_perp.tolist() + state.a_z.tolist() + state.a_d.tolist()
+        return (all(low < v < high for v, low, high in zip(estimates, lo, hi))
                 and min(H.dot(state.a_z).tolist()) > self.min_depth)
 
     def clamp(self, state, H):
@@ -236,7 +240,7 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
 
     # eq (24)
-    a_perp_dot = gains.Gamma_z_perp * (dx - dx_obs).dot(model.Y_z_perp(W, qd))
+    a_perp_dot = gains.Gamma_z_perp * (dx - dx_obs).dot(qd.dot(W))  # Y_z_perp = qd . W
     # eq (25): -Gamma_z (Y_z**^T Delta x - Y_z*^T Delta x_o) with
     #   Y_z*  = Y_z(q, Z^-1 J q_dot - 1/2 Z^-1 Z_dot e_obs) + Y_z_bar(q, q_dot, x + e_obs/2)
     #         = Y_z(q, x_obs_model) + Y_z_bar(q, q_dot, x_mid)

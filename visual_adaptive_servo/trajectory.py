@@ -22,16 +22,18 @@ class SinusoidTrajectory:
     omega: float
 
     def __post_init__(self):
-        # rows a_cos, a_sin: one product gives x_d and both derivatives (called every sample)
-        object.__setattr__(self, "_amplitudes", np.array([self.a_cos, self.a_sin], dtype=float))
+        # rows a_cos, a_sin, offset: one product gives x_d and both derivatives (called
+        # every sample)
+        object.__setattr__(self, "_coefficients",
+                           np.array([self.a_cos, self.a_sin, self.offset], dtype=float))
 
     def __call__(self, t):
         """Return (x_d, x_d_dot, x_d_ddot) at time t (a number), each (2m,)."""
         w = self.omega
         c, s = cos(w * t), sin(w * t)
-        x, xd, xdd = np.array([[c, s], [-w * s, w * c], [-w * w * c, -w * w * s]]).dot(
-            self._amplitudes)
-        return x + self.offset, xd, xdd
+        x, xd, xdd = np.array([[c, s, 1.0], [-w * s, w * c, 0.0],
+                               [-w * w * c, -w * w * s, 0.0]]).dot(self._coefficients)
+        return x, xd, xdd
 
 
 def quintic_blend(tau):
