@@ -139,16 +139,21 @@ class PinholeCamera:
     rotation: np.ndarray
     origin: np.ndarray
 
+    def __post_init__(self):
+        # base frame -> [f beta X_C, f beta Y_C, Z_C] in one product (every control period)
+        scaling = np.diag([self.focal_length * self.scale] * 2 + [1.0])
+        object.__setattr__(self, "_to_image", (scaling @ np.asarray(self.rotation)).T)
+
     def project(self, points):
         """Pixels (2m,) and depths (m,) of base-frame points (m, 3)."""
-        pc = (np.asarray(points) - self.origin).dot(self.rotation.T)
-        z = pc[:, 2]
+        p = (np.asarray(points) - self.origin).dot(self._to_image)
+        z = p[:, 2]
         if min(z.tolist()) > 0.0:
-            uv = self.focal_length * self.scale * pc[:, :2] / z[:, None]
+            uv = p[:, :2] / p[:, 2:]
         else:
             # a point on or behind the camera plane: inf/NaN pixels, marked not visible
             with np.errstate(divide="ignore", invalid="ignore"):
-                uv = self.focal_length * self.scale * pc[:, :2] / z[:, None]
+                uv = p[:, :2] / p[:, 2:]
         return uv.reshape(-1), z
 
     @classmethod
