@@ -16,7 +16,8 @@
 
 ``launch/paper_3dof.launch.py`` is started with a 2 s scenario on a private
 ROS domain; the test waits for the simulator to report the duration reached,
-and after shutdown every process must have exited with status 0.  Skipped
+the simulator must then exit by itself, and after shutdown every process must
+have exited with status 0.  Skipped
 without launch_testing or when the package is not installed (colcon build).
 """
 
@@ -71,9 +72,11 @@ def generate_test_description():
 
 class TestLoop(unittest.TestCase):
 
-    def test_simulator_reaches_its_duration(self, proc_output):
+    def test_simulator_reaches_its_duration_and_exits(self, proc_output, proc_info):
         proc_output.assertWaitFor("controller connected: simulation starts", timeout=60)
         proc_output.assertWaitFor("duration 2.0 s reached after 400 steps", timeout=120)
+        proc_output.assertWaitFor("0 command timeouts, 0 refused commands", timeout=10)
+        proc_info.assertWaitForShutdown(process="sim_node", timeout=30)
 
 
 @launch_testing.post_shutdown_test()
