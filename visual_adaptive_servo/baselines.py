@@ -82,11 +82,11 @@ def velocity_law(model, gains, state, q, qd, x, x_dot, xd, xd_dot, xd_ddot, proj
     H, dH, dH_rate, W, W_rate = tensors
     a_z_perp, a_z = state.a_z_perp, state.a_z
     H_rate = qd @ dH
-    z_hat = H @ a_z
-    z_rate_hat = H_rate @ a_z
-    Zh = np.repeat(z_hat, 2)
+    H2, dH2 = np.repeat(H, 2, axis=0), np.repeat(dH, 2, axis=0)   # rows per coordinate
+    Zh = H2 @ a_z
+    Zh_rate = (qd @ dH2) @ a_z
     J_perp = W @ a_z_perp
-    J_z = np.repeat(dH @ a_z, 2, axis=0)
+    J_z = dH2 @ a_z
 
     dx = x - xd
     x_r_dot = xd_dot - gains.gamma * dx
@@ -105,8 +105,8 @@ def velocity_law(model, gains, state, q, qd, x, x_dot, xd, xd_dot, xd_ddot, proj
         e = Y_e @ a_z - Y_perp @ a_z_perp
         a_perp_dot = a_perp_dot + gains.Gamma_z_perp * (Y_perp.T @ (prediction_gain * e))
         a_z_dot = a_z_dot - gains.Gamma_z * (Y_e.T @ (prediction_gain * e))
-    return joint_space_law(model, gains, state, q, qd, tensors, (J_perp, J_z),
-                           (z_hat, z_rate_hat, Zh), (u, u_dot, x_r_dot, x_r_ddot),
+    return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
+                           (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
                            (x_dot, a_perp_dot, a_z_dot), projection, min_singular_value)
 
 

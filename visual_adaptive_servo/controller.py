@@ -216,14 +216,15 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         tensors = model.kinematic_tensors(q, qd)
     H, dH, dH_rate, W, W_rate = tensors
     a_z_perp, a_z = state.a_z_perp, state.a_z
-    H_rate = qd.dot(dH)                               # (m, p_z), d/dt H along q_dot
-    z_hat = H.dot(a_z)                                # (m,)
-    z_rate_hat = H_rate.dot(a_z)                      # model rate, hat{Z_dot}
-    Zh = z_hat.repeat(2)
-    Zh_rate = z_rate_hat.repeat(2)
+    # the depth tensors with each point's rows repeated for its two image coordinates,
+    # so that depths, their rates and J_z come out per coordinate (2m, ...)
+    H2, dH2 = H.repeat(2, axis=0), dH.repeat(2, axis=0)
+    H2_rate = qd.dot(dH2)                             # (2m, p_z), d/dt H along q_dot
+    Zh = H2.dot(a_z)                                  # hat{Z}, (2m,)
+    Zh_rate = H2_rate.dot(a_z)                        # its model rate, hat{Z_dot}
     # eq (a1): J_hat(q, u) = J_perp - U J_z, with row 2i+k of U J_z = u_i[k] J_z_hat[i]
     J_perp = W.dot(a_z_perp)                          # (2m, n)
-    J_z = dH.dot(a_z).repeat(2, axis=0)               # (2m, n), each point's row twice
+    J_z = dH2.dot(a_z)                                # (2m, n), each point's row twice
 
     x_obs = state.x_obs
     e_obs = x_obs - xd                                # x_o - x_d
@@ -250,12 +251,11 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     # repeated per coordinate, so neither regressor is formed.
     w_H = x_obs_model * dx_obs - x_r_dot * dx
     w_H_rate = x_mid * dx_obs - u * dx
-    a_z_dot = gains.Gamma_z * (w_H.dot(H.repeat(2, axis=0))
-                               + w_H_rate.dot(H_rate.repeat(2, axis=0)))
+    a_z_dot = gains.Gamma_z * (w_H.dot(H2) + w_H_rate.dot(H2_rate))
 
     u_dot = 0.5 * (x_obs_dot + xd_dot)
-    return joint_space_law(model, gains, state, q, qd, tensors, (J_perp, J_z),
-                           (z_hat, z_rate_hat, Zh), (u, u_dot, x_r_dot, x_r_ddot),
+    return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
+                           (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
                            (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value)
 
 
@@ -269,11 +269,12 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
     Parameters
     ----------
     tensors : tuple
-        ``model.kinematic_tensors(q, qd)``.
+        ``(H2, dH2, dH_rate, W, W_rate)``: ``model.kinematic_tensors(q, qd)`` with the
+        rows of H and dH repeated per image coordinate, (2m, p_z) and (2m, n, p_z).
     jacobian : (J_perp, J_z)
         The two parts of J_hat of eq (a1), (2m, n) each (rows of J_z per coordinate).
-    depth : (z_hat, z_rate_hat, Zh)
-        Estimated depths (m,), their model rate (m,), the depths per coordinate (2m,).
+    depth : (Zh, Zh_rate)
+        Estimated depths and their model rate per image coordinate, (2m,) each.
     references : (u, u_dot, x_r_dot, x_r_ddot)
         Where J* is evaluated and its rate, and the image reference velocity and
         acceleration, (2m,) each.
@@ -284,25 +285,25 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
     -------
     LawOutput
     """
-    H, dH, dH_rate, W, W_rate = tensors
+    H2, dH2, dH_rate, W, W_rate = tensors
     J_perp, J_z = jacobian
-    z_hat, z_rate_hat, Zh = depth
+    Zh, Zh_rate = depth
     u, u_dot, x_r_dot, x_r_ddot = references
     x_obs_dot, a_perp_dot, a_z_dot = image_rates
     a_z_perp, a_z = state.a_z_perp, state.a_z
     projection_active = False
     if projection is not None:
         a_perp_dot, a_z_dot, projection_active = projection.kinematic_rates(
-            state, a_perp_dot, a_z_dot, H, gains.Gamma_z)
+            state, a_perp_dot, a_z_dot, H2[::2], gains.Gamma_z)
 
     # eq (18): J* = J_hat(q, u) and its TOTAL time derivative, through q_dot (the
     # *_rate tensors), the adaptation rates and u_dot
     u_col = u[:, None]
     J_star = J_perp - u_col * J_z
-    J_z_dot = (dH_rate.dot(a_z) + dH.dot(a_z_dot)).repeat(2, axis=0)
+    J_z_dot = dH_rate.repeat(2, axis=0).dot(a_z) + dH2.dot(a_z_dot)
     J_star_dot = (W_rate.dot(a_z_perp) + W.dot(a_perp_dot)
                   - u_dot[:, None] * J_z - u_col * J_z_dot)
-    Zh_dot_total = (z_rate_hat + H.dot(a_z_dot)).repeat(2)
+    Zh_dot_total = Zh_rate + H2.dot(a_z_dot)
 
     G_inv, sigma_min, damped = _damped_gram_inverse(J_star.dot(J_star.T), min_singular_value)
     y = G_inv.dot(Zh * x_r_dot)
@@ -320,7 +321,7 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
         a_d_dot, active_d = projection.dynamic_rate(state.a_d, a_d_dot)
         projection_active = projection_active or active_d
     rates = EstimatorState(x_obs_dot, a_perp_dot, a_z_dot, a_d_dot)
-    return LawOutput(tau, rates, s, qr_dot, qr_ddot, J_star, z_hat, sigma_min, damped,
+    return LawOutput(tau, rates, s, qr_dot, qr_ddot, J_star, Zh[::2], sigma_min, damped,
                      projection_active)
 
 
