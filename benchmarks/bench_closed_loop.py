@@ -103,6 +103,8 @@ def main(argv=None):
         "final_rms_error_px": summary["final_rms_error_px"], "diverged": summary["diverged"],
         "python": platform.python_version(), "numpy": np.__version__,
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
+        # other processes on a small machine move the tails (p99, min/max) most
+        "load_average_1min": os.getloadavg()[0],
     }
     print(f"closed loop, {args.duration:g} s simulated, median of {args.repeats} runs "
           f"(numpy {np.__version__}, Python {platform.python_version()})\n")

@@ -113,6 +113,8 @@ def main(argv=None):
         "step": stats(step_ns), "control_law": stats(law_ns),
         "python": platform.python_version(), "numpy": np.__version__,
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
+        # other processes on a small machine move the tails (p99, min/max) most
+        "load_average_1min": os.getloadavg()[0],
     }
     print(f"controller latency, n={model.n}, m={model.m}, {args.steps} samples x "
           f"{args.repeats} replays (numpy {np.__version__}, Python {platform.python_version()})\n")
