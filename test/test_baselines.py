@@ -110,3 +110,10 @@ def test_compare_figures_on_a_known_signal():
     # the rate of sin is cos: RMS of cos over the same window, to the difference quotient
     assert fig["torque_rate_rms"] == pytest.approx(np.sqrt(np.mean(np.cos(t[window]) ** 2)),
                                                    rel=1e-2)
+
+
+def test_vas_compare_is_registered():
+    from visual_adaptive_servo.cli import build_parser
+
+    args = build_parser().parse_args(["compare", "--out", "x", "--duration", "5"])
+    assert args.command == "compare" and args.duration == 5.0 and args.transient == 5.0
