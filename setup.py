@@ -41,7 +41,9 @@ setup(
         "matplotlib>=3.6",
         "rosbags>=0.10.4",
     ],
-    extras_require={"test": ["pytest>=7", "ruff>=0.5"]},
+    # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
+    extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
+                             "flake8-comprehensions", "flake8-quotes", "flake8-import-order"]},
     zip_safe=True,
     maintainer="visual_adaptive_servo maintainers",
     maintainer_email="maintainers@users.noreply.h-seed-00a3853d.example",

@@ -84,4 +84,3 @@ def simulate_continuous(model, gains, trajectory, q0, qd0, state0, dt, steps, ob
         k4 = closed_loop_rates(model, gains, trajectory, t + dt, y + dt * k3)[0]
         y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         t += dt
-

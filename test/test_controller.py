@@ -86,7 +86,7 @@ def lyapunov_terms(model, gains, y, out, x, desired):
     integrand = Js @ (Js / z) / gains.gamma      # -d(Pi*)/dt
     # eq (32): the exact rate of V2, Pi* included
     V2_rate = (-gains.alpha * d_xo @ (z * d_xo) - gains.gamma * d_x @ (z * d_x)
-              - gains.gamma * d_x @ (z * d_xo) + d_x @ Js - integrand)
+               - gains.gamma * d_x @ (z * d_xo) + d_x @ Js - integrand)
     return V1, V2, V1_rate, integrand, V2_rate
 
 

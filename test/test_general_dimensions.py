@@ -98,12 +98,11 @@ def test_qr_ddot_is_time_derivative_of_qr_dot_for_several_features(n, m):
         o2 = law(t + dt / 2, advance(st, o1.rates, dt / 2))
         o3 = law(t + dt / 2, advance(st, o2.rates, dt / 2))
         o4 = law(t + dt, advance(st, o3.rates, dt))
-        rates = [o.rates for o in (o1, o2, o3, o4)]
-        st = EstimatorState(*(getattr(st, f) + dt / 6 * (getattr(rates[0], f)
-                                                           + 2 * getattr(rates[1], f)
-                                                           + 2 * getattr(rates[2], f)
-                                                           + getattr(rates[3], f))
-                              for f in ("x_obs", "a_z_perp", "a_z", "a_d")))
+        r1, r2, r3, r4 = (o.rates for o in (o1, o2, o3, o4))
+        st = EstimatorState(*(
+            getattr(st, f) + dt / 6 * (getattr(r1, f) + 2 * getattr(r2, f)
+                                       + 2 * getattr(r3, f) + getattr(r4, f))
+            for f in ("x_obs", "a_z_perp", "a_z", "a_d")))
     qr_dot = np.array([e[0] for e in log])
     qr_ddot = np.array([e[1] for e in log])[1:-1]
     assert min(e[2] for e in log) > 0.1, "keep J* well away from singular for this check"

@@ -88,6 +88,7 @@ def test_kinematic_tensor_rates_match_finite_difference(model, rng):
     for _ in range(10):
         q, qd = random_state(rng)
         _, _, dH_rate, _, W_rate = model.kinematic_tensors(q, qd)
+
         def tensor(index, qd=qd):
             return lambda p: model.kinematic_tensors(p, qd)[index]
 

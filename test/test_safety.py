@@ -87,9 +87,9 @@ def test_zero_blend_time_is_the_paper_start():
 
 # -- projection (Remark 6) --------------------------------------------------------------------
 def make_projection(model, **bounds):
-    kw = dict(a_z_perp_min=np.full(2, 100.0), a_z_perp_max=np.full(2, 1000.0),
-              a_z_min=np.array([0.5, 0.5, 1.0]), a_z_max=np.array([10.0, 10.0, 20.0]),
-              a_d_min=np.full(8, -np.inf), a_d_max=np.full(8, np.inf), min_depth=2.0)
+    kw = {"a_z_perp_min": np.full(2, 100.0), "a_z_perp_max": np.full(2, 1000.0),
+          "a_z_min": np.array([0.5, 0.5, 1.0]), "a_z_max": np.array([10.0, 10.0, 20.0]),
+          "a_d_min": np.full(8, -np.inf), "a_d_max": np.full(8, np.inf), "min_depth": 2.0}
     kw.update(bounds)
     return Projection(**kw)
 

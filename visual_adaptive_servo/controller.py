@@ -569,8 +569,8 @@ class AdaptiveVisualTracker:
                 log.warning("sample at t=%.4f rejected: %s", t, p)
             self._rejecting = kinds
         safety = self.config
-        xd = self.desired_at(t)[0] if self.t_last is not None else np.full(2 * self.model.m,
-                                                                              np.nan)
+        xd = (self.desired_at(t)[0] if self.t_last is not None
+              else np.full(2 * self.model.m, np.nan))
         if self.t_last_tau is not None and t - self.t_last_tau <= safety["safety.hold_time"]:
             tau, status = self.last_tau, "hold"
         else:

@@ -114,11 +114,6 @@ def _record_step(rec, msgs, names, labels, meas, res, tau_cmd, diag_due):
                                                           message, values, "controller"))
 
 
-def parameter_labels(model):
-    return ([f"a_z_perp.{s}" for s in model.a_z_perp_labels]
-            + [f"a_z.{s}" for s in model.a_z_labels] + [f"a_d.{s}" for s in model.a_d_labels])
-
-
 def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, plots=True,
                  faults=None, controller_factory=AdaptiveVisualTracker):
     """Run the closed loop and write every output into ``out_dir``; return the summary.
@@ -150,7 +145,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     sim = Simulator(scenario.sim)
     ctl = controller_factory(scenario.controller)
     series = Series(steps, model)
-    labels = parameter_labels(model)
+    labels = m.parameter_labels(model)
     counters = {"rejected": 0, "fallback": 0, "saturated": 0, "projection_active": 0,
                 "damped": 0, "sim_refused_commands": 0}
     diverged, reason, interrupted, error = False, "", False, None
