@@ -92,11 +92,12 @@ class SimNode(Node):
         self.lockstep = config.timing_mode == "lockstep"
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
 
-        self.clock_pub = self.create_publisher(msgs.Clock, "/clock", RELIABLE)
-        self.joint_pub = self.create_publisher(msgs.JointState, "/joint_states", measurement_qos)
-        self.feature_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features",
-                                                 measurement_qos)
-        self.depth_pub = self.create_publisher(msgs.Float64MultiArray, "~/true_depth", RELIABLE)
+        self.publishers_by_topic = {
+            topic: self.create_publisher(getattr(msgs, kind), topic, qos)
+            for topic, kind, qos in (("/clock", "Clock", RELIABLE),
+                                     ("/joint_states", "JointState", measurement_qos),
+                                     ("/camera/features", "PolygonStamped", measurement_qos),
+                                     ("~/true_depth", "Float64MultiArray", RELIABLE))}
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         self.create_subscription(msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command,
@@ -136,7 +137,7 @@ class SimNode(Node):
     # -- start -------------------------------------------------------------------
     def _on_start_poll(self):
         if (self.count_publishers(COMMAND_TOPIC) == 0
-                or self.joint_pub.get_subscription_count() == 0):
+                or self.publishers_by_topic["/joint_states"].get_subscription_count() == 0):
             return
         self.start_timer.cancel()
         self.started = True
@@ -203,13 +204,9 @@ class SimNode(Node):
     # -- outputs -----------------------------------------------------------------
     def _publish_measurement(self):
         meas = self.measurement = self.sim.measure()
-        msgs, t = self.msgs, meas.t
-        self.clock_pub.publish(m.clock_to_msg(msgs, t))
-        self.joint_pub.publish(m.joint_state_to_msg(msgs, t, self.config.joint_names, meas.q,
-                                                    meas.qd, meas.tau_applied))
-        if meas.pixels is not None and np.all(np.isfinite(meas.pixels)):
-            self.feature_pub.publish(m.features_to_msg(msgs, meas.feature_stamp, meas.pixels))
-        self.depth_pub.publish(m.float_array_to_msg(msgs, meas.true_depth))
+        t = meas.t
+        for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
+            self.publishers_by_topic[topic].publish(msg)
         if meas.problems:
             self.problem = "; ".join(meas.problems)
         self._publish_diagnostics(t)

@@ -54,7 +54,6 @@ import logging
 import sys
 import time
 
-import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -103,15 +102,14 @@ class ControllerNode(Node):
 
         measurement_qos = RELIABLE if config.timing_mode == "lockstep" else qos_profile_sensor_data
         msgs = self.msgs
-        self.command_pub = self.create_publisher(msgs.Float64MultiArray,
-                                                 "/effort_controller/commands", RELIABLE)
-        self.desired_pub = self.create_publisher(msgs.PolygonStamped, "~/desired", RELIABLE)
-        self.observed_pub = self.create_publisher(msgs.PolygonStamped, "~/observed", RELIABLE)
-        self.error_pub = self.create_publisher(msgs.PolygonStamped, "~/tracking_error", RELIABLE)
-        self.depth_pub = self.create_publisher(msgs.Float64MultiArray, "~/estimated_depth",
-                                               RELIABLE)
-        self.parameters_pub = self.create_publisher(msgs.Float64MultiArray, "~/parameters",
-                                                    RELIABLE)
+        self.publishers_by_topic = {
+            topic: self.create_publisher(getattr(msgs, kind), topic, RELIABLE)
+            for topic, kind in (("/effort_controller/commands", "Float64MultiArray"),
+                                ("~/desired", "PolygonStamped"),
+                                ("~/observed", "PolygonStamped"),
+                                ("~/tracking_error", "PolygonStamped"),
+                                ("~/estimated_depth", "Float64MultiArray"),
+                                ("~/parameters", "Float64MultiArray"))}
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
@@ -171,16 +169,8 @@ class ControllerNode(Node):
 
     def _publish(self, res):
         msgs, t = self.msgs, res.t
-        self.command_pub.publish(m.float_array_to_msg(msgs, res.tau))
-        if np.all(np.isfinite(res.x_d)):
-            self.desired_pub.publish(m.features_to_msg(msgs, t, res.x_d))
-        self.observed_pub.publish(m.features_to_msg(msgs, t, res.x_obs))
-        if np.all(np.isfinite(res.error)):
-            self.error_pub.publish(m.features_to_msg(msgs, t, res.error))
-        self.depth_pub.publish(m.float_array_to_msg(msgs, res.z_hat))
-        st = res.state
-        self.parameters_pub.publish(m.float_array_to_msg(
-            msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), self.labels))
+        for topic, msg in m.controller_outputs(msgs, res, self.labels):
+            self.publishers_by_topic[topic].publish(msg)
         if (res.status != self.last_status or self.t_last_diagnostics is None
                 or t - self.t_last_diagnostics >= DIAGNOSTICS_PERIOD - 1e-9):
             level, message, values = health(res)

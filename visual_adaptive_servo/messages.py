@@ -191,3 +191,39 @@ def image_to_msg(msgs, t, rgb, frame_id="camera"):
     h, w, _ = rgb.shape
     return msgs.Image(header=header(msgs, t, frame_id), height=h, width=w, encoding="rgb8",
                       is_bigendian=0, step=3 * w, data=msgs.uint8s(rgb))
+
+
+def sim_outputs(msgs, meas, joint_names):
+    """(topic, message) pairs ``sim_node`` publishes for one measurement.
+
+    ``meas`` is a :class:`sim_bridge.simulator.Measurement`; ``~`` in a topic
+    is the node's namespace.  ``vas run`` records exactly these.
+    """
+    t = meas.t
+    out = [("/clock", clock_to_msg(msgs, t)),
+           ("/joint_states", joint_state_to_msg(msgs, t, joint_names, meas.q, meas.qd,
+                                                meas.tau_applied))]
+    if meas.pixels is not None and np.all(np.isfinite(meas.pixels)):
+        out.append(("/camera/features", features_to_msg(msgs, meas.feature_stamp, meas.pixels)))
+    out.append(("~/true_depth", float_array_to_msg(msgs, meas.true_depth)))
+    return out
+
+
+def controller_outputs(msgs, res, labels):
+    """(topic, message) pairs ``controller_node`` publishes for one :class:`StepResult`.
+
+    The command always; x_d and x - x_d only when defined (a rejected sample has
+    no tracking error).  ``/diagnostics`` is left to the caller's cadence.
+    """
+    t = res.t
+    out = [("/effort_controller/commands", float_array_to_msg(msgs, res.tau))]
+    if np.all(np.isfinite(res.x_d)):
+        out.append(("~/desired", features_to_msg(msgs, t, res.x_d)))
+    out.append(("~/observed", features_to_msg(msgs, t, res.x_obs)))
+    if np.all(np.isfinite(res.error)):
+        out.append(("~/tracking_error", features_to_msg(msgs, t, res.error)))
+    out.append(("~/estimated_depth", float_array_to_msg(msgs, res.z_hat)))
+    st = res.state
+    out.append(("~/parameters", float_array_to_msg(
+        msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels)))
+    return out

@@ -90,24 +90,13 @@ class Series:
         return {k: v[:self.count] for k, v in self.data.items()}
 
 
-def _record_step(rec, msgs, names, labels, meas, res, tau_cmd, diag_due):
+def _record_step(rec, msgs, names, labels, meas, res, diag_due):
+    """Record what sim_node and controller_node publish for this period."""
     t = meas.t
-    rec.write("/clock", t, m.clock_to_msg(msgs, t))
-    rec.write("/joint_states", t, m.joint_state_to_msg(msgs, t, names, meas.q, meas.qd,
-                                                       meas.tau_applied))
-    if meas.pixels is not None and np.all(np.isfinite(meas.pixels)):
-        rec.write("/camera/features", t, m.features_to_msg(msgs, meas.feature_stamp, meas.pixels))
-    rec.write(f"{SIM_NS}/true_depth", t, m.float_array_to_msg(msgs, meas.true_depth))
-    rec.write("/effort_controller/commands", t, m.float_array_to_msg(msgs, tau_cmd))
-    if np.all(np.isfinite(res.x_d)):
-        rec.write(f"{CONTROLLER_NS}/desired", t, m.features_to_msg(msgs, t, res.x_d))
-    rec.write(f"{CONTROLLER_NS}/observed", t, m.features_to_msg(msgs, t, res.x_obs))
-    if np.all(np.isfinite(res.error)):
-        rec.write(f"{CONTROLLER_NS}/tracking_error", t, m.features_to_msg(msgs, t, res.error))
-    rec.write(f"{CONTROLLER_NS}/estimated_depth", t, m.float_array_to_msg(msgs, res.z_hat))
-    st = res.state
-    rec.write(f"{CONTROLLER_NS}/parameters", t, m.float_array_to_msg(
-        msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels))
+    for topic, msg in m.sim_outputs(msgs, meas, names):
+        rec.write(topic.replace("~", SIM_NS), t, msg)
+    for topic, msg in m.controller_outputs(msgs, res, labels):
+        rec.write(topic.replace("~", CONTROLLER_NS), t, msg)
     if diag_due:
         level, message, values = health(res)
         rec.write("/diagnostics", t, m.diagnostics_to_msg(msgs, t, "controller_node", level,
@@ -172,7 +161,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
             series.status.append(res.status)
             if recorder is not None:
-                _record_step(recorder, msgs, scenario.sim.joint_names, labels, meas, res, res.tau,
+                _record_step(recorder, msgs, scenario.sim.joint_names, labels, meas, res,
                              k % diag_every == 0 or res.status != last_status)
             last_status = res.status
             unsat = res.tau_unsaturated if res.tau_unsaturated is not None else res.tau
