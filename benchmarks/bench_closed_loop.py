@@ -38,13 +38,13 @@ Prints a markdown table and writes benchmarks/results/closed_loop.json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import tempfile
 import time
 
 import numpy as np
+from benchlib import environment, write_result
 
 from sim_bridge.simulator import Simulator
 from visual_adaptive_servo.config import load_scenario
@@ -115,10 +115,7 @@ def main(argv=None):
                                  "max": float(np.max(call))},
         "per_period_us": parts,
         "final_rms_error_px": summary["final_rms_error_px"], "diverged": summary["diverged"],
-        "python": platform.python_version(), "numpy": np.__version__,
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
-        # other processes on a small machine move the tails (p99, min/max) most
-        "load_average_1min": os.getloadavg()[0],
+        **environment(),
     }
     print(f"closed loop, {args.duration:g} s simulated, median of {args.repeats} runs "
           f"(numpy {np.__version__}, Python {platform.python_version()})\n")
@@ -134,11 +131,7 @@ def main(argv=None):
     for name, us in parts.items():
         print(f"| {name} | {us:.1f} |")
     print(f"| sum | {sum(parts.values()):.1f} |")
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w", encoding="utf-8") as handle:
-        json.dump(result, handle, indent=2)
-        handle.write("\n")
-    print(f"\nwritten {args.out}")
+    write_result(args.out, result)
 
 
 if __name__ == "__main__":

@@ -37,12 +37,12 @@ Prints a markdown table and writes benchmarks/results/controller_step.json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
 
 import numpy as np
+from benchlib import environment, write_result
 
 from sim_bridge.simulator import Simulator
 from visual_adaptive_servo.config import load_scenario
@@ -125,10 +125,7 @@ def main(argv=None):
         "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
         "n": model.n, "m": model.m, "steps": args.steps, "repeats": args.repeats,
         "step": stats(step_ns), "control_law": stats(law_ns),
-        "python": platform.python_version(), "numpy": np.__version__,
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
-        # other processes on a small machine move the tails (p99, min/max) most
-        "load_average_1min": os.getloadavg()[0],
+        **environment(),
     }
     print(f"controller latency, n={model.n}, m={model.m}, {args.steps} samples x "
           f"{args.repeats} replays (numpy {np.__version__}, Python {platform.python_version()})\n")
@@ -138,11 +135,7 @@ def main(argv=None):
         s = result[key]
         print(f"| `{name}` | {s['median_us']:.1f} | {s['p99_us']:.1f} | {s['mean_us']:.1f} | "
               f"{s['min_us']:.1f} |")
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w", encoding="utf-8") as handle:
-        json.dump(result, handle, indent=2)
-        handle.write("\n")
-    print(f"\nwritten {args.out}")
+    write_result(args.out, result)
 
 
 if __name__ == "__main__":
