@@ -65,7 +65,7 @@ from __future__ import annotations
 import numpy as np
 
 from .controller import (AdaptiveVisualTracker, EstimatorState, LawOutput, _damped_gram_inverse,
-                         joint_space_law)
+                         estimated_kinematics, joint_space_law)
 
 
 def velocity_law(model, gains, state, q, qd, x, x_dot, xd, xd_dot, xd_ddot, projection=None,
@@ -82,11 +82,7 @@ def velocity_law(model, gains, state, q, qd, x, x_dot, xd, xd_dot, xd_ddot, proj
     H, dH, dH_rate, W, W_rate = tensors
     a_z_perp, a_z = state.a_z_perp, state.a_z
     H_rate = qd @ dH
-    H2, dH2 = np.repeat(H, 2, axis=0), np.repeat(dH, 2, axis=0)   # rows per coordinate
-    Zh = H2 @ a_z
-    Zh_rate = (qd @ dH2) @ a_z
-    J_perp = W @ a_z_perp
-    J_z = dH2 @ a_z
+    H2, dH2, _, Zh, Zh_rate, J_perp, J_z = estimated_kinematics(tensors, qd, state)
 
     dx = x - xd
     x_r_dot = xd_dot - gains.gamma * dx

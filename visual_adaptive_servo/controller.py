@@ -206,17 +206,8 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     """
     if tensors is None:
         tensors = model.kinematic_tensors(q, qd)
-    H, dH, dH_rate, W, W_rate = tensors
-    a_z_perp, a_z = state.a_z_perp, state.a_z
-    # the depth tensors with each point's rows repeated for its two image coordinates,
-    # so that depths, their rates and J_z come out per coordinate (2m, ...)
-    H2, dH2 = H.repeat(2, axis=0), dH.repeat(2, axis=0)
-    H2_rate = qd.dot(dH2)                             # (2m, p_z), d/dt H along q_dot
-    Zh = H2.dot(a_z)                                  # hat{Z}, (2m,)
-    Zh_rate = H2_rate.dot(a_z)                        # its model rate, hat{Z_dot}
-    # eq (a1): J_hat(q, u) = J_perp - U J_z, with row 2i+k of U J_z = u_i[k] J_z_hat[i]
-    J_perp = W.dot(a_z_perp)                          # (2m, n)
-    J_z = dH2.dot(a_z)                                # (2m, n), each point's row twice
+    _, _, dH_rate, W, W_rate = tensors
+    H2, dH2, H2_rate, Zh, Zh_rate, J_perp, J_z = estimated_kinematics(tensors, qd, state)
 
     x_obs = state.x_obs
     e_obs = x_obs - xd                                # x_o - x_d
@@ -249,6 +240,22 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
                            (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
                            (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value)
+
+
+def estimated_kinematics(tensors, qd, state):
+    """Per-coordinate depth quantities and the two parts of J_hat from the model tensors.
+
+    The depth tensors get each point's rows repeated for its two image
+    coordinates, so depths, their rates and J_z come out per coordinate.
+    Returns ``(H2, dH2, H2_rate, Zh, Zh_rate, J_perp, J_z)``: (2m, p_z),
+    (2m, n, p_z), (2m, p_z), hat{Z} (2m,), its model rate hat{Z_dot} (2m,), and
+    J_perp, J_z (2m, n) of eq (a1), J_hat(q, u) = J_perp - U J_z.
+    """
+    H, dH, _, W, _ = tensors
+    H2, dH2 = H.repeat(2, axis=0), dH.repeat(2, axis=0)
+    H2_rate = qd.dot(dH2)                             # d/dt H along q_dot
+    return (H2, dH2, H2_rate, H2.dot(state.a_z), H2_rate.dot(state.a_z),
+            W.dot(state.a_z_perp), dH2.dot(state.a_z))
 
 
 def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, references,
