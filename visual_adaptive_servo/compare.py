@@ -134,8 +134,10 @@ def read_timeseries(path):
 
 def run_figures(t, x_true, x_d, tau, period, transient=TRANSIENT_S):
     """The figures of one run over t >= ``transient`` (see the module docstring)."""
+    from .runner import point_error     # lazy like run_compare's: keeps `vas` start-up light
+
     nan = math.nan
-    err = np.linalg.norm((x_true - x_d).reshape(len(t), -1, 2), axis=2).max(axis=1)
+    err = point_error(x_true, x_d)
     window = (t >= transient - 1e-9) & np.isfinite(err)
     figures = {"rms_error_px": nan, "max_error_px": nan, "torque_rms": nan,
                "torque_rate_rms": nan, "window_s": 0.0}
@@ -310,6 +312,8 @@ def plot_compare(results, out_dir, transient=TRANSIENT_S):
 
 
 def _plot_timeseries(results, out_dir, configs, names, plt):
+    from .runner import point_error
+
     shown = ("clean", "noise_0.5", "delay_2")
     fig, axes = plt.subplots(len(configs), len(shown), figsize=(12, 3.2 * len(configs)),
                              squeeze=False, sharex=True)
@@ -321,7 +325,7 @@ def _plot_timeseries(results, out_dir, configs, names, plt):
                 if not os.path.exists(path):
                     continue
                 t, x_true, x_d, _ = read_timeseries(path)
-                err = np.linalg.norm((x_true - x_d).reshape(len(t), -1, 2), axis=2).max(axis=1)
+                err = point_error(x_true, x_d)
                 every = max(1, len(t) // 600)       # keeps the PNG small
                 ax.semilogy(t[::every], np.maximum(err[::every], 1e-4), lw=0.8, label=name)
             ax.set_ylim(1e-4, 1e2)

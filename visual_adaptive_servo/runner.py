@@ -232,12 +232,14 @@ def summarize(data, status, wall, diverged, reason, counters):
     }
 
 
-def error_figures(x, x_d, window):
-    """(RMS over ``window``, max) of the per-sample largest point error |x_i - x_d,i| [px].
+def point_error(x, x_d):
+    """Per-sample largest point error max_i |x_i - x_d,i| [px] of (N, 2m) arrays -> (N,)."""
+    return np.linalg.norm((x - x_d).reshape(len(x), -1, 2), axis=2).max(axis=1)
 
-    Samples without a valid measurement (NaN) are left out.
-    """
-    err = np.linalg.norm((x - x_d).reshape(len(x), -1, 2), axis=2).max(axis=1)
+
+def error_figures(x, x_d, window):
+    """(RMS over ``window``, max) of :func:`point_error`, leaving out NaN samples."""
+    err = point_error(x, x_d)
     valid = np.isfinite(err)
     rms = float(np.sqrt(np.mean(err[window & valid] ** 2))) if np.any(window & valid) else math.nan
     return rms, (float(np.max(err[valid])) if valid.any() else math.nan)
