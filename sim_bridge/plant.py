@@ -200,12 +200,11 @@ class FeatureCamera:
         self.rng = np.random.default_rng(seed)
         self.buffer = deque(maxlen=int(delay_frames) + 1)
 
-    def capture(self, stamp, points):
-        """Capture the points now; return the frame due for delivery now."""
-        return self.capture_projected(stamp, *self.camera.project(points))
+    def capture(self, stamp, pixels, depth):
+        """Capture a frame of the exact projection ``camera.project(points)`` now.
 
-    def capture_projected(self, stamp, pixels, depth):
-        """:meth:`capture` with the exact projection of the points already done."""
+        Returns the frame due for delivery now (noise added, delay applied).
+        """
         visible = min(depth.tolist()) > 0.0
         if self.noise > 0.0:
             pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)

@@ -83,7 +83,7 @@ class Simulator:
         q, qd = self.plant.joint_state()
         t = self.t
         true_pixels, true_depth = self.camera.project(self.plant.tip_position()[None, :])
-        frame = self.feature_camera.capture_projected(t, true_pixels, true_depth)
+        frame = self.feature_camera.capture(t, true_pixels, true_depth)
         problems = []
         pixels, stamp = None, None
         if self.step_index >= self._delay_frames:
