@@ -12,35 +12,24 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The PyBullet plant: a torque-controlled arm seen by a fixed pinhole camera.
+"""The PyBullet plant: a torque-controlled arm from any URDF, with feature points.
 
 ROS-free.  PyBullet runs in DIRECT mode with an explicit time step; its default
 velocity motors and link damping are switched off, so the simulated arm is the
 rigid-body model M q_ddot + C q_dot + g = tau and nothing else.  A torque
 command lasts one ``stepSimulation`` in PyBullet, so :meth:`ArmPlant.advance`
 re-applies it before every physics sub-step (zero-order hold over the control
-period).
+period).  The cameras are in :mod:`.camera`.
 """
 
 from __future__ import annotations
 
 import os
-from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 import pybullet
 
 URDF_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "urdf")
-SHIPPED_URDFS = {"paper_rrr": "paper_rrr.urdf"}
-
-
-def shipped_urdf(model_name):
-    """Path of the URDF shipped for a model name."""
-    try:
-        return os.path.join(URDF_DIR, SHIPPED_URDFS[model_name])
-    except KeyError:
-        raise ValueError(f"no URDF is shipped for model {model_name!r}") from None
 
 
 class ArmPlant:
@@ -49,17 +38,26 @@ class ArmPlant:
     Parameters
     ----------
     urdf : str
-        Path of the arm's URDF; its movable joints in order are the controlled joints.
+        Path of the arm's URDF; its root link is fixed at the world origin.
     physics_dt : float
         Physics step [s].
     gravity : float
         Gravity along -z [m/s^2].
     tip_link : str
-        Name of the link whose frame origin is the feature point.
+        Link that carries the feature points.
+    joint_names : sequence of str, optional
+        The controlled joints, in order (default: every revolute/prismatic joint of
+        the file, in file order).  Any other movable joint (a gripper's fingers) is
+        held at its zero position by a stiff position motor.
+    feature_points : (m, 3), optional
+        Offsets c_i of the feature points in the tip frame [m]; default the tip
+        link's origin.
     """
 
-    def __init__(self, urdf, physics_dt=0.001, gravity=9.81, tip_link="tip"):
+    def __init__(self, urdf, physics_dt=0.001, gravity=9.81, tip_link="tip", joint_names=None,
+                 feature_points=((0.0, 0.0, 0.0),)):
         self.physics_dt = float(physics_dt)
+        self.offsets = np.asarray(feature_points, dtype=float).reshape(-1, 3)
         self.client = pybullet.connect(pybullet.DIRECT)
         try:
             pb = self.client
@@ -68,27 +66,42 @@ class ArmPlant:
             self.body = pybullet.loadURDF(urdf, useFixedBase=True,
                                           flags=pybullet.URDF_USE_INERTIA_FROM_FILE,
                                           physicsClientId=pb)
-            self.joints, self.joint_names, tips = [], [], []
+            movable, by_name, tips = [], {}, []
             for j in range(pybullet.getNumJoints(self.body, physicsClientId=pb)):
                 info = pybullet.getJointInfo(self.body, j, physicsClientId=pb)
                 if info[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC):
-                    self.joints.append(j)
-                    self.joint_names.append(info[1].decode())
+                    movable.append(j)
+                    by_name[info[1].decode()] = j
                 if info[12].decode() == tip_link:
                     tips.append(j)
                 pybullet.changeDynamics(self.body, j, linearDamping=0.0, angularDamping=0.0,
                                         jointDamping=0.0, physicsClientId=pb)
             if not tips:
-                raise ValueError(f"{urdf}: no link named {tip_link!r}")
+                raise ValueError(f"{urdf}: no link named {tip_link!r} (or it is the root link)")
             self.tip = tips[0]
+            if joint_names is None:
+                joint_names = [name for name, j in sorted(by_name.items(), key=lambda e: e[1])]
+            missing = [name for name in joint_names if name not in by_name]
+            if missing:
+                raise ValueError(f"{urdf}: no movable joint(s) {missing}; movable: "
+                                 f"{sorted(by_name)}")
+            self.joints = [by_name[name] for name in joint_names]
+            self.joint_names = list(joint_names)
+            self.held = [j for j in movable if j not in self.joints]
             # switch off the default velocity motors once, before torque control
             pybullet.setJointMotorControlArray(self.body, self.joints, pybullet.VELOCITY_CONTROL,
                                                forces=[0.0] * len(self.joints),
                                                physicsClientId=pb)
+            if self.held:
+                pybullet.setJointMotorControlArray(
+                    self.body, self.held, pybullet.POSITION_CONTROL,
+                    targetPositions=[0.0] * len(self.held), forces=[1e4] * len(self.held),
+                    physicsClientId=pb)
         except Exception:
             pybullet.disconnect(self.client)
             raise
         self.n = len(self.joints)
+        self.markers = []
         self.t = 0.0
 
     def reset(self, q, qd=None):
@@ -96,6 +109,8 @@ class ArmPlant:
         for j, qi, qdi in zip(self.joints, q, qd):
             pybullet.resetJointState(self.body, j, float(qi), float(qdi),
                                      physicsClientId=self.client)
+        for j in self.held:
+            pybullet.resetJointState(self.body, j, 0.0, 0.0, physicsClientId=self.client)
         self.t = 0.0
 
     def joint_state(self):
@@ -104,11 +119,42 @@ class ArmPlant:
         q, qd = np.array(list(zip(*states))[:2])
         return q, qd
 
+    def tip_pose(self):
+        """World rotation (3, 3) and origin (3,) of the tip link's frame."""
+        state = pybullet.getLinkState(self.body, self.tip, computeForwardKinematics=True,
+                                      physicsClientId=self.client)
+        R = np.array(pybullet.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+        return R, np.array(state[4])
+
     def tip_position(self):
-        """World position of the feature point (3,)."""
+        """World position of the tip link's origin (3,)."""
         state = pybullet.getLinkState(self.body, self.tip, computeForwardKinematics=True,
                                       physicsClientId=self.client)
         return np.array(state[4])
+
+    def feature_positions(self):
+        """World positions (m, 3) of the feature points."""
+        R, p = self.tip_pose()
+        return p + self.offsets.dot(R.T)
+
+    def add_markers(self, radius, colors):
+        """Coloured spheres at the feature points, for the rendered picture (no mass, no contact).
+
+        ``colors`` (m, 3) RGB 0-255.  :meth:`place_markers` moves them to the points.
+        """
+        for rgb in np.asarray(colors, dtype=float).reshape(-1, 3):
+            shape = pybullet.createVisualShape(pybullet.GEOM_SPHERE, radius=float(radius),
+                                               rgbaColor=list(rgb / 255.0) + [1.0],
+                                               physicsClientId=self.client)
+            self.markers.append(pybullet.createMultiBody(
+                baseMass=0.0, baseVisualShapeIndex=shape, baseCollisionShapeIndex=-1,
+                physicsClientId=self.client))
+        self.place_markers()
+
+    def place_markers(self):
+        for body, point in zip(self.markers, self.feature_positions()):
+            pybullet.resetBasePositionAndOrientation(body, point.tolist(), (0.0, 0.0, 0.0, 1.0),
+                                                     physicsClientId=self.client)
 
     def advance(self, tau, substeps):
         """Hold ``tau`` for ``substeps`` physics steps (zero-order hold)."""
@@ -119,14 +165,25 @@ class ArmPlant:
             pybullet.stepSimulation(physicsClientId=self.client)
         self.t += substeps * self.physics_dt
 
+    def _all_joints(self, values):
+        """``values`` of the controlled joints spread over every movable joint (others 0)."""
+        full = {j: float(v) for j, v in zip(self.joints, values)}
+        order = sorted(self.joints + self.held)
+        return order, [full.get(j, 0.0) for j in order]
+
     def mass_matrix(self, q):
-        return np.array(pybullet.calculateMassMatrix(self.body, [float(v) for v in q],
-                                                     physicsClientId=self.client))
+        order, full = self._all_joints(q)
+        M = np.array(pybullet.calculateMassMatrix(self.body, full, physicsClientId=self.client))
+        index = [order.index(j) for j in self.joints]
+        return M[np.ix_(index, index)]
 
     def inverse_dynamics(self, q, qd, qdd):
-        return np.array(pybullet.calculateInverseDynamics(
-            self.body, [float(v) for v in q], [float(v) for v in qd], [float(v) for v in qdd],
-            physicsClientId=self.client))
+        order, q_full = self._all_joints(q)
+        _, qd_full = self._all_joints(qd)
+        _, qdd_full = self._all_joints(qdd)
+        tau = np.array(pybullet.calculateInverseDynamics(self.body, q_full, qd_full, qdd_full,
+                                                         physicsClientId=self.client))
+        return tau[[order.index(j) for j in self.joints]]
 
     def close(self):
         if self.client is not None and pybullet.isConnected(self.client):
@@ -138,75 +195,3 @@ class ArmPlant:
 
     def __exit__(self, *exc):
         self.close()
-
-
-@dataclass(frozen=True)
-class PinholeCamera:
-    """A fixed pinhole camera: pixels = f beta [X_C, Y_C] / Z_C, origin on the optical axis.
-
-    ``rotation`` (3, 3) has the camera axes X_C, Y_C, Z_C as rows in the base
-    frame; ``origin`` (3,) is the camera centre in the base frame.
-    """
-
-    focal_length: float
-    scale: float
-    rotation: np.ndarray
-    origin: np.ndarray
-
-    def __post_init__(self):
-        # base frame -> [f beta X_C, f beta Y_C, Z_C] in one product (every control period)
-        scaling = np.diag([self.focal_length * self.scale] * 2 + [1.0])
-        object.__setattr__(self, "_to_image", (scaling @ np.asarray(self.rotation)).T)
-
-    def project(self, points):
-        """Pixels (2m,) and depths (m,) of base-frame points (m, 3)."""
-        p = (np.asarray(points) - self.origin).dot(self._to_image)
-        z = p[:, 2]
-        if min(z.tolist()) > 0.0:
-            uv = p[:, :2] / p[:, 2:]
-        else:
-            # a point on or behind the camera plane: inf/NaN pixels, marked not visible
-            with np.errstate(divide="ignore", invalid="ignore"):
-                uv = p[:, :2] / p[:, 2:]
-        return uv.reshape(-1), z
-
-    @classmethod
-    def paper(cls, focal_length=0.15, scale=900.0, distance=5.0):
-        """The paper's camera: X_C || Y_0, Y_C || Z_0, Z_C || X_0, centre at (-d_C, 0, 0)."""
-        rotation = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
-        return cls(focal_length, scale, rotation, np.array([-distance, 0.0, 0.0]))
-
-
-@dataclass(frozen=True)
-class CameraFrame:
-    """One camera measurement: capture time, pixels (2m,) and true depths (m,)."""
-
-    stamp: float
-    pixels: np.ndarray
-    depth: np.ndarray
-    visible: bool
-
-
-class FeatureCamera:
-    """Produces the feature pixels seen by the controller: noise and frame delay.
-
-    A frame captured at step k is delivered ``delay_frames`` frames later, with
-    its own capture stamp.  Points behind the camera are marked not visible.
-    """
-
-    def __init__(self, camera, pixel_noise_std=0.0, delay_frames=0, seed=0):
-        self.camera = camera
-        self.noise = float(pixel_noise_std)
-        self.rng = np.random.default_rng(seed)
-        self.buffer = deque(maxlen=int(delay_frames) + 1)
-
-    def capture(self, stamp, pixels, depth):
-        """Capture a frame of the exact projection ``camera.project(points)`` now.
-
-        Returns the frame due for delivery now (noise added, delay applied).
-        """
-        visible = min(depth.tolist()) > 0.0
-        if self.noise > 0.0:
-            pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
-        self.buffer.append(CameraFrame(stamp, pixels, depth, visible))
-        return self.buffer[0]

@@ -15,15 +15,13 @@
 """Rendering the fixed camera's view of the simulated arm, with features drawn on it.
 
 ROS-free: ``sim_node`` publishes the result as a sensor_msgs/Image.  The
-picture comes from ``pybullet.getCameraImage`` with the TinyRenderer (works
-in DIRECT mode, no display needed), looking from the camera centre along its
-optical axis Z_C with Y_C up; the frustum is the camera's image bounds, so a
-pixel coordinate (u, v) of the feature camera (origin on the optical axis)
-lands on the same spot of the picture as the point it measures.
-
-The camera axes are right-handed with Z_C forward and Y_C up, so X_C points to
-the LEFT of the picture: u grows leftwards and v upwards.  The picture is what
-the camera sees, upright; :func:`image_coordinates` does the mapping.
+picture comes from ``pybullet.getCameraImage`` (the TinyRenderer by default:
+works in DIRECT mode, no display needed), from the camera centre along its
+optical axis Z_C with -Y_C up, over the camera's own frustum: rendered at the
+camera's resolution, pixel (row, col) of the picture covers the raw image
+coordinates [col, col + 1) x [row, row + 1) of :mod:`.camera`, so a point
+projected by :class:`~.camera.PinholeCamera` lands exactly where it is drawn.
+Rendered at another size, coordinates scale with it.
 """
 
 from __future__ import annotations
@@ -40,33 +38,38 @@ COLOR_DESIRED = (30, 200, 30)
 COLOR_OBSERVED = (40, 90, 255)
 
 
-def view_matrices(camera, bounds, near=NEAR, far=FAR):
-    """PyBullet (view, projection) matrices of ``camera`` over the image ``bounds``.
-
-    Parameters
-    ----------
-    camera : plant.PinholeCamera
-    bounds : (4,) [u_min, u_max, v_min, v_max] in px, origin on the optical axis
-    """
+def view_matrices(camera, near=NEAR, far=FAR):
+    """PyBullet (view, projection) matrices of a :class:`~.camera.PinholeCamera`."""
     rotation = np.asarray(camera.rotation, dtype=float)
-    eye = np.asarray(camera.origin, dtype=float)
+    eye = np.asarray(camera.position, dtype=float)
     view = pybullet.computeViewMatrix(eye.tolist(), (eye + rotation[2]).tolist(),
-                                      rotation[1].tolist())
-    u0, u1, v0, v1 = (float(b) for b in bounds)
-    fb = camera.focal_length * camera.scale
-    # the view's right axis is Z_C x Y_C = -X_C, so u_max is the left edge
-    projection = pybullet.computeProjectionMatrix(-u1 / fb * near, -u0 / fb * near,
-                                                  v0 / fb * near, v1 / fb * near, near, far)
+                                      (-rotation[1]).tolist())
+    # frustum at the near plane: raw column c is X_C/Z_C = (c - cx)/fx, row r is
+    # Y_C/Z_C = (r - cy)/fy with Y_C pointing down the picture
+    W, H = camera.width, camera.height
+    projection = pybullet.computeProjectionMatrix(
+        -camera.cx / camera.fx * near, (W - camera.cx) / camera.fx * near,
+        -(H - camera.cy) / camera.fy * near, camera.cy / camera.fy * near, near, far)
     return view, projection
 
 
-def image_coordinates(pixels, bounds, width, height):
-    """(columns, rows) in a width x height picture of feature pixels (2m,) [u, v, ...]."""
-    uv = np.asarray(pixels, dtype=float).reshape(-1, 2)
-    u0, u1, v0, v1 = (float(b) for b in bounds)
-    cols = width * (u1 - uv[:, 0]) / (u1 - u0)
-    rows = height * (v1 - uv[:, 1]) / (v1 - v0)
-    return cols, rows
+def image_coordinates(pixels, camera, width=None, height=None):
+    """(columns, rows), continuous, in a width x height picture of controller pixels (2m,)."""
+    raw = camera.to_raw(pixels)
+    sx = (width or camera.width) / camera.width
+    sy = (height or camera.height) / camera.height
+    return raw[:, 0] * sx, raw[:, 1] * sy
+
+
+def render_image(client, camera, width=None, height=None, renderer=None):
+    """The camera's view as an (height, width, 3) uint8 RGB array (default: its own size)."""
+    width, height = int(width or camera.width), int(height or camera.height)
+    view, projection = view_matrices(camera)
+    _, _, rgba, _, _ = pybullet.getCameraImage(
+        width, height, viewMatrix=view, projectionMatrix=projection,
+        renderer=pybullet.ER_TINY_RENDERER if renderer is None else renderer,
+        physicsClientId=client)
+    return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
 
 
 def draw_marker(rgb, col, row, color, radius=4, shape="ring"):
@@ -88,33 +91,28 @@ def draw_marker(rgb, col, row, color, radius=4, shape="ring"):
     rgb[rows[inside], cols[inside]] = color
 
 
-def render_camera_view(client, camera, bounds, width, height, markers=()):
+def render_camera_view(client, camera, width, height, markers=()):
     """The camera's view of the PyBullet scene, with markers drawn.
 
     Parameters
     ----------
     client : int
         PyBullet physics client id (DIRECT mode is fine).
-    camera : plant.PinholeCamera
-    bounds : (4,) image bounds [px]
+    camera : camera.PinholeCamera
     width, height : int
         Size of the picture [px].
     markers : iterable of (pixels (2m,), colour (3,), shape)
-        Feature pixels to draw; non-finite ones are skipped.
+        Feature pixels (controller convention) to draw; non-finite ones are skipped.
 
     Returns
     -------
     (height, width, 3) uint8 RGB array.
     """
-    view, projection = view_matrices(camera, bounds)
-    _, _, rgba, _, _ = pybullet.getCameraImage(
-        int(width), int(height), viewMatrix=view, projectionMatrix=projection,
-        renderer=pybullet.ER_TINY_RENDERER, physicsClientId=client)
-    rgb = np.asarray(rgba, dtype=np.uint8).reshape(int(height), int(width), 4)[:, :, :3].copy()
+    rgb = render_image(client, camera, width, height)
     for pixels, color, shape in markers:
         if pixels is None:
             continue
-        cols, rows = image_coordinates(pixels, bounds, width, height)
+        cols, rows = image_coordinates(pixels, camera, width, height)
         for col, row in zip(cols, rows):
-            draw_marker(rgb, col, row, color, shape=shape)
+            draw_marker(rgb, col - 0.5, row - 0.5, color, shape=shape)
     return rgb

@@ -68,7 +68,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 
 from visual_adaptive_servo import messages as m
-from visual_adaptive_servo.config import SIM_PARAMS, SIM_SECTION, ConfigError, SimConfig
+from visual_adaptive_servo.config import (
+    SIM_PARAMS,
+    SIM_SECTION,
+    ConfigError,
+    SimConfig,
+    build_sim_arm,
+)
 from visual_adaptive_servo.ros_params import declare_schema
 
 from . import render
@@ -85,7 +91,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
-        params = declare_schema(self, SIM_PARAMS, SIM_SECTION)
+        params = declare_schema(self, SIM_PARAMS, SIM_SECTION, build_sim_arm)
         self.config = config = SimConfig.from_params(params)
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
@@ -163,7 +169,7 @@ class SimNode(Node):
         self.problem = (f"no command within {self.config.command_timeout} s at "
                         f"t={self.sim.t:.3f}: zero torque applied")
         self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
-        self._advance(np.zeros(self.sim.model.n))
+        self._advance(np.zeros(self.sim.n))
 
     def _on_tick(self):
         if self.finished.done():
@@ -175,7 +181,7 @@ class SimNode(Node):
             self.problem = (f"command older than {self.config.command_timeout} s at "
                             f"t={self.sim.t:.3f}: zero torque applied")
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
-        self._advance(self.command if fresh else np.zeros(self.sim.model.n))
+        self._advance(self.command if fresh else np.zeros(self.sim.n))
 
     def _advance(self, tau):
         refused = self.sim.apply(tau)
@@ -231,7 +237,7 @@ class SimNode(Node):
     def _publish_image(self, meas):
         cfg = self.config
         rgb = render.render_camera_view(
-            self.sim.plant.client, self.sim.camera, cfg.image_bounds, cfg.params["render.width"],
+            self.sim.plant.client, self.sim.camera, cfg.params["render.width"],
             cfg.params["render.height"],
             [(self.overlay["desired"], render.COLOR_DESIRED, "cross"),
              (self.overlay["observed"], render.COLOR_OBSERVED, "ring"),

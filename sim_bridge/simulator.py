@@ -28,7 +28,10 @@ from math import isfinite
 
 import numpy as np
 
-from .plant import ArmPlant, FeatureCamera, PinholeCamera, shipped_urdf
+from visual_adaptive_servo.models import GRAVITY
+
+from .camera import FeatureCamera
+from .plant import ArmPlant
 
 
 @dataclass(frozen=True)
@@ -46,28 +49,25 @@ class Measurement:
     problems: tuple = ()
 
 
-def camera_for(model):
-    """The fixed camera a model describes (only the paper's camera for now)."""
-    return PinholeCamera.paper(model.focal_length, model.scale, model.camera_distance)
-
-
 class Simulator:
-    """PyBullet arm + pinhole camera configured by a :class:`SimConfig`."""
+    """PyBullet arm + pinhole camera configured by a :class:`SimConfig`.
+
+    The arm is ``sim_node.urdf`` (its chain ``base_link`` -> ``tip_link``), the
+    feature points are ``feature_points`` in the tip frame, the camera is
+    ``sim_node.camera.*``: nothing here depends on the controller's model.
+    """
 
     def __init__(self, config):
         self.config = config
-        self.model = config.model
-        urdf = config.urdf or shipped_urdf(config.model_name)
-        self.plant = ArmPlant(urdf, config.physics_dt, self.model.gravity)
-        if self.plant.n != self.model.n:
-            self.plant.close()
-            raise ValueError(f"sim_node.urdf: {urdf} has {self.plant.n} joints, the model "
-                             f"{config.model_name!r} has {self.model.n}")
-        self.camera = camera_for(self.model)
+        arm = config.arm
+        self.n = arm.n
+        self.plant = ArmPlant(arm.chain.urdf, config.physics_dt, GRAVITY, arm.chain.tip_link,
+                              arm.chain.joint_names, arm.offsets)
+        self.camera = config.camera
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
                                             config.camera_delay_frames, config.seed)
         self.plant.reset(config.initial_positions, config.initial_velocities)
-        self.tau = np.zeros(self.model.n)
+        self.tau = np.zeros(self.n)
         self.step_index = 0
         # read once: SimConfig attribute access goes through __getattr__ (every period)
         self._period = config.control_period
@@ -82,7 +82,7 @@ class Simulator:
         """Sensors now; a frame is delivered once the camera delay has passed."""
         q, qd = self.plant.joint_state()
         t = self.t
-        true_pixels, true_depth = self.camera.project(self.plant.tip_position()[None, :])
+        true_pixels, true_depth = self.camera.project(self.plant.feature_positions())
         frame = self.feature_camera.capture(t, true_pixels, true_depth)
         problems = []
         pixels, stamp = None, None
@@ -99,11 +99,11 @@ class Simulator:
         """Hold ``tau`` for one control period; returns a reason if it was refused."""
         problem = None
         tau = np.asarray(tau, dtype=float).reshape(-1)
-        if tau.shape != (self.model.n,):
-            problem = f"command: expected {self.model.n} torques, got {tau.shape[0]}"
+        if tau.shape != (self.n,):
+            problem = f"command: expected {self.n} torques, got {tau.shape[0]}"
         elif not all(map(isfinite, tau.tolist())):
             problem = f"command: contains NaN or inf: {tau.tolist()}"
-        self.tau = np.zeros(self.model.n) if problem else tau
+        self.tau = np.zeros(self.n) if problem else tau
         self.plant.advance(self.tau, self._substeps)
         self.step_index += 1
         return problem

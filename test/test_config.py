@@ -65,8 +65,22 @@ def test_every_schema_entry_has_a_description():
     ("sim_node.control_period=0.0055", r"sim_node\.control_period: must be a whole multiple"),
     ("sim_node.initial_positions=[0.0, 1.0]", r"sim_node\.initial_positions: needs 3 values"),
     ("sim_node.timing_mode=fast", r"sim_node\.timing_mode: must be one of"),
-    ("sim_node.image_bounds=[10, -10, -5, 5]", r"sim_node\.image_bounds: needs u_min < u_max"),
     ("sim_node.camera_delay_frames=1.5", r"sim_node\.camera_delay_frames: must be an integer"),
+    ("sim_node.camera.pixel_axes=[1.0, 0.5]", r"sim_node\.camera\.pixel_axes: each must be 1 or"),
+    ("sim_node.camera.look_at=[-5.0, 0.0, 0.0]", r"sim_node\.camera\.look_at: must differ"),
+    ("sim_node.camera.orientation=euler", r"sim_node\.camera\.orientation: must be 'look_at'"),
+    ("sim_node.camera.image_size=[640.5, 480]", r"sim_node\.camera\.image_size: two whole"),
+    ("sim_node.camera.position=[-5.0, 0.5, 0.0]",
+     r"sim_node\.camera: model paper_rrr assumes the paper's camera"),
+    ("sim_node.urdf=nowhere.urdf", r"sim_node\.urdf: 'nowhere.urdf' not found"),
+    ("sim_node.tip_link=link9", r"sim_node\.tip_link: no link 'link9'"),
+    ("sim_node.base_link=link2", r"sim_node\.tip_link: 'tip' is not below base_link 'link2'|"
+     r"sim_node\.base_link: 'link2' moves"),
+    ("sim_node.feature_points=[0.0, 0.0]", r"sim_node\.feature_points: 3 numbers per point"),
+    ("controller_node.image_bounds=[-320, 0, -240, 240]",
+     r"sim_node\.initial_positions: feature point\(s\) \[1\] outside the image at the start"),
+    ("controller_node.trajectory.type=spiral", r"controller_node\.trajectory\.type: must be one"),
+    ("controller_node.trajectory.type=table", r"controller_node\.trajectory\.file: no file name"),
 ])
 def test_invalid_values_are_refused_with_name_and_rule(override, message):
     with pytest.raises(ConfigError, match=message):

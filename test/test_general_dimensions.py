@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from visual_adaptive_servo.controller import EstimatorState, Gains, control_law
-from visual_adaptive_servo.model import RobotCameraModel
+from visual_adaptive_servo.models import RobotCameraModel
 
 
 class SyntheticModel(RobotCameraModel):
@@ -57,6 +57,12 @@ class SyntheticModel(RobotCameraModel):
         raise NotImplementedError
 
     def project(self, q):
+        raise NotImplementedError
+
+    def estimate(self, camera_matrix, length_scale=1.0, inertia_scale=1.0):
+        raise NotImplementedError
+
+    def set_ground_truth(self, camera_matrix, chain=None, offsets=None):
         raise NotImplementedError
 
     def mass_matrix(self, q):

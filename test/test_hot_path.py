@@ -27,7 +27,7 @@ import pytest
 from conftest import paper_gains
 from visual_adaptive_servo.controller import (EstimatorState, Projection, _damped_gram_inverse,
                                               control_law)
-from visual_adaptive_servo.model import PaperRRRCamera
+from visual_adaptive_servo.models import PaperRRRCamera
 
 
 @pytest.fixture

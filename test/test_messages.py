@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from visual_adaptive_servo import messages as m
-from visual_adaptive_servo.model import make_model
+from visual_adaptive_servo.models import make_model
 from visual_adaptive_servo.recording import TOPICS
 
 HAVE_RCLPY = importlib.util.find_spec("rclpy") is not None

@@ -21,8 +21,11 @@ and PyBullet's own mass matrix and inverse dynamics of the shipped URDF.
 import numpy as np
 import pytest
 
-from sim_bridge.plant import ArmPlant, PinholeCamera, shipped_urdf
-from visual_adaptive_servo.model import PaperRRRCamera, make_model
+from sim_bridge.camera import PinholeCamera
+from sim_bridge.plant import URDF_DIR, ArmPlant
+from visual_adaptive_servo.models import PaperRRRCamera, make_model
+
+PAPER_URDF = f"{URDF_DIR}/paper_rrr.urdf"
 
 H_FD = 1e-6
 
@@ -34,7 +37,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def plant():
-    with ArmPlant(shipped_urdf("paper_rrr"), physics_dt=0.001) as arm:
+    with ArmPlant(PAPER_URDF, physics_dt=0.001) as arm:
         yield arm
 
 
@@ -111,7 +114,7 @@ def test_projection_matches_pybullet_tip_and_pinhole_camera(model, plant, rng):
     for _ in range(5):
         q, _ = random_state(rng)
         plant.reset(q)
-        pixels, depth = camera.project(plant.tip_position()[None, :])
+        pixels, depth = camera.project(plant.feature_positions())
         x, z = model.project(q)
         np.testing.assert_allclose(pixels, x, atol=1e-5)
         np.testing.assert_allclose(depth, z, atol=1e-7)
@@ -151,7 +154,7 @@ def test_mdot_minus_2c_is_skew_symmetric(model, rng):
 
 def test_plant_follows_rigid_body_model_without_damping_or_motors(model, rng):
     """Forward dynamics of the plant over one 1 ms step equals M^-1 (tau - C qd - g)."""
-    with ArmPlant(shipped_urdf("paper_rrr"), physics_dt=1e-4) as arm:
+    with ArmPlant(PAPER_URDF, physics_dt=1e-4) as arm:
         q, qd = random_state(rng)
         tau = rng.uniform(-20, 20, 3)
         arm.reset(q, qd)
@@ -165,3 +168,24 @@ def test_plant_follows_rigid_body_model_without_damping_or_motors(model, rng):
 def test_unknown_model_name_is_refused():
     with pytest.raises(ValueError, match="unknown model name 'ur5'"):
         make_model("ur5")
+
+
+def test_paper_camera_matrix_is_the_general_cameras_paper_case(model):
+    np.testing.assert_allclose(PinholeCamera.paper().projection_matrix, model.camera_matrix,
+                               atol=1e-12)
+
+
+def test_paper_model_refuses_another_camera(model):
+    camera = PinholeCamera.look_at((-5.0, 1.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 135.0,
+                                   135.0, 320.0, 240.0, 640, 480, (320.0, 240.0), (-1.0, -1.0))
+    with pytest.raises(ValueError, match="model paper_rrr assumes the paper's camera"):
+        PaperRRRCamera().set_ground_truth(camera.projection_matrix)
+
+
+def test_paper_estimate_from_the_guessed_camera_is_the_papers_initial_estimate():
+    guess = PinholeCamera.paper(focal_length=0.1, scale=700.0, distance=3.0)
+    a_perp, a_z, a_d = PaperRRRCamera().estimate(guess.projection_matrix, length_scale=1.5,
+                                                 inertia_scale=0.0)
+    np.testing.assert_allclose(a_perp, [210.0, 210.0])
+    np.testing.assert_allclose(a_z, [3.0, 3.0, 3.0])
+    np.testing.assert_array_equal(a_d, np.zeros(8))

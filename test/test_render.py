@@ -24,20 +24,20 @@ import pybullet
 import pytest
 
 from sim_bridge import render
-from sim_bridge.plant import ArmPlant, PinholeCamera, shipped_urdf
+from sim_bridge.camera import PinholeCamera
+from sim_bridge.plant import URDF_DIR, ArmPlant
 
-BOUNDS = (-320.0, 320.0, -240.0, 240.0)
 WIDTH, HEIGHT = 320, 240
 
 
 @pytest.fixture()
 def plant():
-    with ArmPlant(shipped_urdf("paper_rrr")) as arm:
+    with ArmPlant(f"{URDF_DIR}/paper_rrr.urdf") as arm:
         yield arm
 
 
 def _segmentation(plant, camera):
-    view, projection = render.view_matrices(camera, BOUNDS)
+    view, projection = render.view_matrices(camera)
     _, _, _, _, seg = pybullet.getCameraImage(
         WIDTH, HEIGHT, viewMatrix=view, projectionMatrix=projection,
         renderer=pybullet.ER_TINY_RENDERER, physicsClientId=plant.client)
@@ -60,16 +60,35 @@ def test_projected_arm_points_land_on_the_rendered_arm(plant, q):
     for point in (tip, 0.5 * (tip + elbow)):
         pixels, depth = camera.project(point[None, :])
         assert depth[0] > 0.0
-        cols, rows = render.image_coordinates(pixels, BOUNDS, WIDTH, HEIGHT)
-        r, c = int(np.rint(rows[0])), int(np.rint(cols[0]))
+        cols, rows = render.image_coordinates(pixels, camera, WIDTH, HEIGHT)
+        r, c = int(rows[0]), int(cols[0])
         window = seg[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
         assert np.any(window == plant.body), (q, point, r, c)
 
 
 def test_image_coordinates_put_the_optical_axis_in_the_centre_and_u_to_the_left():
-    cols, rows = render.image_coordinates([0.0, 0.0, 100.0, 50.0], BOUNDS, WIDTH, HEIGHT)
+    camera = PinholeCamera.paper()
+    cols, rows = render.image_coordinates([0.0, 0.0, 100.0, 50.0], camera, WIDTH, HEIGHT)
     np.testing.assert_allclose(cols, [160.0, 110.0])
     np.testing.assert_allclose(rows, [120.0, 95.0])
+
+
+@pytest.mark.parametrize("rpy", [(0.3, -0.2, 0.1), (-0.5, 0.4, 2.0)])
+def test_a_general_camera_renders_a_point_where_it_projects(plant, rpy):
+    """Off-centre principal point, unequal scales, odd size: the marker is drawn at its pixel."""
+    plant.reset((0.4, 0.3, -0.6))
+    target = plant.feature_positions()[0]
+    R = PinholeCamera.from_rpy((0.0, 0.0, 0.0), rpy, 1.0, 1.0, 0.0, 0.0, 1, 1).rotation
+    camera = PinholeCamera(R, target - 3.0 * R[2] + 0.2 * R[0], 420.0, 380.0, 150.3, 101.7, 301,
+                           211)
+    plant.add_markers(0.12, [(255, 0, 255)])          # encloses the URDF's 8 cm tip sphere
+    rgb = render.render_image(plant.client, camera).astype(int)
+    pixels, depth = camera.project(plant.feature_positions())
+    # the renderer shades the sphere: magenta = red and blue high, green low
+    magenta = np.argwhere((rgb[..., 0] > 120) & (rgb[..., 2] > 120) & (rgb[..., 1] < 60))
+    assert len(magenta) > 50 and depth[0] > 0
+    centroid = magenta.mean(axis=0) + 0.5             # (row, col) of pixel centres
+    np.testing.assert_allclose(centroid[::-1], camera.to_raw(pixels)[0], atol=0.5)
 
 
 def test_render_draws_markers_in_their_colours(plant):
@@ -77,14 +96,14 @@ def test_render_draws_markers_in_their_colours(plant):
     camera = PinholeCamera.paper()
     x = np.array([65.0, 65.0])
     x_d = np.array([-100.0, -100.0])
-    rgb = render.render_camera_view(plant.client, camera, BOUNDS, WIDTH, HEIGHT, [
+    rgb = render.render_camera_view(plant.client, camera, WIDTH, HEIGHT, [
         (x, render.COLOR_MEASURED, "ring"), (x_d, render.COLOR_DESIRED, "cross"),
         (np.array([np.nan, np.nan]), render.COLOR_OBSERVED, "ring"), (None, (0, 0, 0), "ring")])
     assert rgb.shape == (HEIGHT, WIDTH, 3) and rgb.dtype == np.uint8
-    cols, rows = render.image_coordinates(x_d, BOUNDS, WIDTH, HEIGHT)
-    assert tuple(rgb[int(np.rint(rows[0])), int(np.rint(cols[0]))]) == render.COLOR_DESIRED
-    cols, rows = render.image_coordinates(x, BOUNDS, WIDTH, HEIGHT)
-    r, c = int(np.rint(rows[0])), int(np.rint(cols[0]))
+    cols, rows = render.image_coordinates(x_d, camera, WIDTH, HEIGHT)
+    assert tuple(rgb[int(rows[0]), int(cols[0])]) == render.COLOR_DESIRED
+    cols, rows = render.image_coordinates(x, camera, WIDTH, HEIGHT)
+    r, c = int(rows[0]), int(cols[0])
     ring = rgb[r - 5:r + 6, c - 5:c + 6].reshape(-1, 3)
     assert any(tuple(p) == render.COLOR_MEASURED for p in ring)
     assert not np.any(np.all(rgb == render.COLOR_OBSERVED, axis=2))

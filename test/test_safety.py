@@ -56,8 +56,9 @@ def test_blended_start_begins_at_the_measurement_and_ends_on_the_trajectory():
     blend = BlendedStart(traj, x0, 1.0, 2.0)
     x, xd, xdd = blend(1.0)
     np.testing.assert_allclose(x, x0)
-    np.testing.assert_allclose(xd, 0.0, atol=1e-12)
-    np.testing.assert_allclose(xdd, 0.0, atol=1e-12)
+    # the fading offset has zero rate at both ends: x_d moves with the trajectory from the start
+    np.testing.assert_allclose(xd, traj(1.0)[1], atol=1e-12)
+    np.testing.assert_allclose(xdd, traj(1.0)[2], atol=1e-12)
     for t in (3.0, 4.5):
         for a, b in zip(blend(t), traj(t)):
             np.testing.assert_allclose(a, b)
@@ -68,6 +69,17 @@ def test_blended_start_begins_at_the_measurement_and_ends_on_the_trajectory():
                                    rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose((blend(t + h)[1] - blend(t - h)[1]) / (2 * h), blend(t)[2],
                                    rtol=1e-5, atol=1e-5)
+
+
+def test_a_start_on_the_trajectory_is_not_blended():
+    traj = SinusoidTrajectory(np.array([45.0, 65.0]), np.array([20.0, 0.0]),
+                              np.array([0.0, 20.0]), np.pi / 3)
+    on = traj(0.7)[0] + np.array([0.004, -0.003])
+    assert BlendedStart.from_measurement(traj, on, 0.7, 2.0, tolerance=0.01) is traj
+    off = traj(0.7)[0] + np.array([0.02, 0.0])
+    blend = BlendedStart.from_measurement(traj, off, 0.7, 2.0, tolerance=0.01)
+    np.testing.assert_allclose(blend(0.7)[0], off)
+    assert BlendedStart.from_measurement(traj, off, 0.7, 0.0, tolerance=0.01) is traj
 
 
 def test_first_sample_has_zero_tracking_error_with_a_blend():

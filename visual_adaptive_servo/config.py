@@ -27,17 +27,25 @@ parameter name and the rule it breaks, and nothing is partially applied.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 import yaml
 
-from .model import RobotCameraModel, make_model
+from sim_bridge.camera import PinholeCamera
+
+from .models import MODEL_NAMES, RobotCameraModel, make_model
+from .models.urdf_arm import check_feature_points
+from .models.urdf_chain import load_chain
+from .resources import resolve_path
+from .trajectory import TRAJECTORY_TYPES, SinusoidTrajectory, TabulatedTrajectory
 
 SIM_SECTION = "sim_node"
 CONTROLLER_SECTION = "controller_node"
 TIMING_MODES = ("lockstep", "realtime")
+STRUCTURE_NAMES = ("model", "urdf", "base_link", "tip_link", "feature_points", "unknown_lengths")
 FALLBACKS = ("gravity_compensation", "zero_torque")
 
 
@@ -49,11 +57,14 @@ class ConfigError(ValueError):
 class ParamSpec:
     """One declared parameter.
 
-    ``default`` is a value or a callable of the model (for lengths that depend
-    on n, m or the parameter counts).  ``kind`` is one of ``float``, ``int``,
-    ``bool``, ``str``, ``float_list``, ``str_list``.  ``low``/``high`` are
-    inclusive bounds applied to every element.  ``runtime`` marks parameters
-    that may safely change while running.
+    ``default`` is a value or a callable ``default(structure, values)`` of the
+    structure (the model, or the simulator's arm: n, m, joint names) and of the
+    values resolved so far, for lengths that depend on n, m or the parameter
+    counts and for estimates computed from other parameters.  ``kind`` is one
+    of ``float``, ``int``, ``bool``, ``str``, ``float_list``, ``str_list``.
+    ``low``/``high`` are inclusive bounds applied to every element.
+    ``runtime`` marks parameters that may safely change while running;
+    ``structure`` those that define the model (read first).
     """
 
     name: str
@@ -63,32 +74,86 @@ class ParamSpec:
     low: float | None = None
     high: float | None = None
     runtime: bool = False
+    structure: bool = False
 
-    def default_for(self, model):
-        return self.default(model) if callable(self.default) else self.default
+    @property
+    def computed(self):
+        """The default depends on the structure or on other parameters."""
+        return callable(self.default)
+
+    def default_for(self, structure, values):
+        return self.default(structure, values) if callable(self.default) else self.default
 
 
 INF = math.inf
+PAPER_URDF = "package://visual_adaptive_servo/urdf/paper_rrr.urdf"
+MARKER_COLORS = (230.0, 30.0, 30.0, 30.0, 200.0, 30.0, 40.0, 90.0, 255.0)   # red, green, blue
 
-SIM_PARAMS = (
-    ParamSpec("model", "paper_rrr", "str", "Robot + camera model name (see model.MODELS)."),
-    ParamSpec("urdf", "", "str", "URDF of the arm; empty = the one shipped for the model."),
+
+def camera_specs(prefix, what):
+    """The parameters of one pinhole camera (defaults: the paper's camera)."""
+    return (
+        ParamSpec(prefix + "position", [-5.0, 0.0, 0.0], "float_list",
+                  f"{what}: centre in the URDF root frame [m]."),
+        ParamSpec(prefix + "orientation", "look_at", "str",
+                  f"{what}: 'look_at' (use look_at and up) or 'rpy' (use rpy)."),
+        ParamSpec(prefix + "look_at", [0.0, 0.0, 0.0], "float_list",
+                  f"{what}: a point on the optical axis [m]."),
+        ParamSpec(prefix + "up", [0.0, 0.0, 1.0], "float_list",
+                  f"{what}: the direction that points up in the picture."),
+        ParamSpec(prefix + "rpy", [0.0, 0.0, 0.0], "float_list",
+                  f"{what}: orientation of the camera frame (X right, Y down, Z along the "
+                  f"optical axis) as URDF roll-pitch-yaw [rad]."),
+        ParamSpec(prefix + "focal_length", 0.15, "float", f"{what}: focal length f [m].",
+                  1e-9, None),
+        ParamSpec(prefix + "pixel_scale", [900.0, 900.0], "float_list",
+                  f"{what}: pixel scales beta_x, beta_y [px/m].", 0.0, None),
+        ParamSpec(prefix + "principal_point", [320.0, 240.0], "float_list",
+                  f"{what}: principal point in raw image coordinates [px]."),
+        ParamSpec(prefix + "image_size", [640.0, 480.0], "float_list",
+                  f"{what}: picture width and height [px].", 1.0, None),
+        ParamSpec(prefix + "pixel_origin", [320.0, 240.0], "float_list",
+                  f"{what}: raw image point that is the controller's pixel origin [px]."),
+        ParamSpec(prefix + "pixel_axes", [-1.0, -1.0], "float_list",
+                  f"{what}: +1/-1 per axis: controller pixel = axes * (raw - origin)."),
+    )
+
+
+def _structure_specs(default_urdf, default_base, default_tip, default_points, what):
+    return (
+        ParamSpec("urdf", default_urdf, "str",
+                  f"URDF of the arm{what} (file path, package:// or pybullet_data://).",
+                  structure=True),
+        ParamSpec("base_link", default_base, "str", "Fixed base link of the chain.",
+                  structure=True),
+        ParamSpec("tip_link", default_tip, "str", "Link carrying the feature points.",
+                  structure=True),
+        ParamSpec("feature_points", default_points, "float_list",
+                  "Offsets c_i of the m = 1..3 feature points in the tip link frame, 3 numbers "
+                  "each [m].", structure=True),
+    )
+
+
+SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "") + (
     ParamSpec("physics_dt", 0.001, "float", "PyBullet physics step [s].", 1e-5, 0.01),
     ParamSpec("control_period", 0.005, "float",
               "Camera frame / control period [s]; a whole multiple of physics_dt.", 1e-4, 1.0),
     ParamSpec("duration", 0.0, "float", "Stop after this simulated time [s]; 0 = run forever.",
               0.0, None),
-    ParamSpec("initial_positions", lambda m: [0.0] * m.n, "float_list",
-              "Joint positions at start [rad]."),
-    ParamSpec("initial_velocities", lambda m: [0.0] * m.n, "float_list",
-              "Joint velocities at start [rad/s]."),
-    ParamSpec("joint_names", lambda m: [f"joint{i + 1}" for i in range(m.n)], "str_list",
-              "Joint names in /joint_states and the command order."),
+    ParamSpec("initial_positions", lambda s, v: [0.0] * s.n, "float_list",
+              "Joint positions at start [rad or m]."),
+    ParamSpec("initial_velocities", lambda s, v: [0.0] * s.n, "float_list",
+              "Joint velocities at start [rad/s or m/s]."),
+    ParamSpec("joint_names", lambda s, v: list(s.joint_names), "str_list",
+              "Joint names in /joint_states and the command order (default: the URDF chain's)."),
     ParamSpec("pixel_noise_std", 0.0, "float", "Gaussian pixel noise std [px].", 0.0, 100.0),
     ParamSpec("camera_delay_frames", 0, "int", "Camera latency in whole frames.", 0, 100),
     ParamSpec("seed", 0, "int", "Seed of the pixel noise generator.", 0, 2**31 - 1),
-    ParamSpec("image_bounds", [-320.0, 320.0, -240.0, 240.0], "float_list",
-              "Image extent [u_min, u_max, v_min, v_max] in px (origin on the optical axis)."),
+) + camera_specs("camera.", "Simulated camera") + (
+    ParamSpec("markers.radius", 0.03, "float",
+              "Radius of the coloured sphere drawn at each feature point [m].", 1e-4, 1.0),
+    ParamSpec("markers.colors", lambda s, v: list(MARKER_COLORS[:3 * s.m]), "float_list",
+              "RGB 0-255 of each feature point's marker, 3 numbers per point.", 0.0, 255.0),
     ParamSpec("timing_mode", "lockstep", "str",
               "lockstep: wait for the command answering each state; realtime: wall-clock timer."),
     ParamSpec("command_timeout", 1.0, "float",
@@ -100,60 +165,89 @@ SIM_PARAMS = (
     ParamSpec("render.height", 240, "int", "Rendered image height [px].", 16, 1080),
 )
 
+
+def _nominal(model, values):
+    """The model's estimate from ``initial_estimate.*`` (what a user knows before the run)."""
+    camera = PinholeCamera.from_params(values, "initial_estimate.camera.", CONTROLLER_SECTION)
+    return model.estimate(camera.projection_matrix, values["initial_estimate.length_scale"],
+                          values["initial_estimate.inertia_scale"])
+
+
 CONTROLLER_PARAMS = (
-    ParamSpec("model", "paper_rrr", "str", "Robot + camera model name (see model.MODELS)."),
-    ParamSpec("joint_names", lambda m: [f"joint{i + 1}" for i in range(m.n)], "str_list",
+    ParamSpec("model", "paper_rrr", "str",
+              f"Robot + camera model: one of {list(MODEL_NAMES)} (paper_rrr: the paper's arm, "
+              f"derived by hand; urdf: any serial arm from urdf/base_link/tip_link).",
+              structure=True),
+) + _structure_specs("", "", "", [0.0, 0.0, 0.0], " (model urdf)") + (
+    ParamSpec("unknown_lengths", ["all"], "str_list",
+              "model urdf: names of the lengths adapted as unknown (joint.x/y/z, point1.x, ...), "
+              "or [all]; the others are taken from the URDF.", structure=True),
+    ParamSpec("joint_names",
+              lambda m, v: list(getattr(m, "joint_names", [f"joint{i + 1}" for i in range(m.n)])),
+              "str_list",
               "ROS node: joints taken from /joint_states, in the order of the torque command."),
     ParamSpec("timing_mode", "lockstep", "str",
               "ROS node: QoS of the measurement subscriptions; must match sim_node.timing_mode "
               "(lockstep: reliable; realtime: best-effort sensor data)."),
     ParamSpec("sample_time", 0.005, "float", "Nominal control period T [s].", 1e-5, 1.0),
-    ParamSpec("K", lambda m: [0.001] * (2 * m.m), "float_list",
+    ParamSpec("K", lambda m, v: [0.001] * (2 * m.m), "float_list",
               "Diagonal of the feedback gain K of eq (22), (2m,).", 0.0, None, True),
     ParamSpec("alpha", 10.0, "float", "Observer gain alpha of eq (10); alpha > gamma/3.",
               0.0, None),
     ParamSpec("gamma", 10.0, "float", "Reference gain gamma of eq (18); alpha > gamma/3.",
               0.0, None),
-    ParamSpec("Gamma_d", lambda m: [300.0] * m.p_d, "float_list",
+    ParamSpec("Gamma_d", lambda m, v: [300.0] * m.p_d, "float_list",
               "Diagonal of the dynamic adaptation gain Gamma_d of eq (23).", 0.0, None, True),
-    ParamSpec("Gamma_z_perp", lambda m: [600.0] * m.p_perp, "float_list",
+    ParamSpec("Gamma_z_perp", lambda m, v: [600.0] * m.p_perp, "float_list",
               "Diagonal of Gamma_z_perp of eq (24).", 0.0, None, True),
-    ParamSpec("Gamma_z", lambda m: [0.2] * m.p_z, "float_list",
+    ParamSpec("Gamma_z", lambda m, v: [0.2] * m.p_z, "float_list",
               "Diagonal of Gamma_z of eq (25).", 0.0, None, True),
-    ParamSpec("a_z_perp_init", lambda m: [1.0] * m.p_perp, "float_list",
-              "Initial estimate of the depth-rate-independent parameters a_z_perp."),
-    ParamSpec("a_z_init", lambda m: [1.0] * m.p_z, "float_list",
-              "Initial estimate of the depth parameters a_z."),
-    ParamSpec("a_d_init", lambda m: [0.0] * m.p_d, "float_list",
-              "Initial estimate of the dynamic parameters a_d."),
-    ParamSpec("trajectory.offset", lambda m: [0.0] * (2 * m.m), "float_list",
+) + camera_specs("initial_estimate.camera.", "Guessed camera for the initial estimates") + (
+    ParamSpec("initial_estimate.length_scale", 1.0, "float",
+              "Initial estimates: the model's nominal lengths times this.", 1e-3, 1e3),
+    ParamSpec("initial_estimate.inertia_scale", 1.0, "float",
+              "Initial estimates: the nominal inertial parameters times this.", 0.0, 1e3),
+    ParamSpec("a_z_perp_init", lambda m, v: list(_nominal(m, v)[0]), "float_list",
+              "Initial estimate of a_z_perp (default: from initial_estimate.*)."),
+    ParamSpec("a_z_init", lambda m, v: list(_nominal(m, v)[1]), "float_list",
+              "Initial estimate of a_z (default: from initial_estimate.*)."),
+    ParamSpec("a_d_init", lambda m, v: list(_nominal(m, v)[2]), "float_list",
+              "Initial estimate of a_d (default: from initial_estimate.*)."),
+    ParamSpec("trajectory.type", "sinusoid", "str",
+              f"Desired image trajectory: one of {list(TRAJECTORY_TYPES)}."),
+    ParamSpec("trajectory.file", "", "str",
+              "trajectory.type table: CSV with columns t, u1, v1, ..., um, vm [s, px]."),
+    ParamSpec("trajectory.offset", lambda m, v: [0.0] * (2 * m.m), "float_list",
               "x_d = offset + a_cos cos(w t) + a_sin sin(w t) [px]."),
-    ParamSpec("trajectory.a_cos", lambda m: [0.0] * (2 * m.m), "float_list",
+    ParamSpec("trajectory.a_cos", lambda m, v: [0.0] * (2 * m.m), "float_list",
               "Cosine amplitudes of x_d [px]."),
-    ParamSpec("trajectory.a_sin", lambda m: [0.0] * (2 * m.m), "float_list",
+    ParamSpec("trajectory.a_sin", lambda m, v: [0.0] * (2 * m.m), "float_list",
               "Sine amplitudes of x_d [px]."),
     ParamSpec("trajectory.omega", 0.0, "float", "Angular frequency w of x_d [rad/s].",
               0.0, None),
     ParamSpec("start_blend_time", 2.0, "float",
-              "Blend x_d in from the first measured feature over this time [s]; 0 = start "
-              "directly on the trajectory (the paper).", 0.0, 60.0),
+              "Blend the offset between the first measured feature and x_d(0) out over this "
+              "time [s] (zero when the start is on the trajectory); 0 = no blend.", 0.0, 60.0),
+    ParamSpec("start_tolerance", 0.01, "float",
+              "A start (or camera recovery) within this of x_d counts as on the trajectory and "
+              "is not blended [px].", 0.0, None),
     ParamSpec("projection.enabled", True, "bool",
               "Project the kinematic adaptation (Remark 6) onto the bounds below."),
-    ParamSpec("projection.a_z_perp_min", lambda m: [-INF] * m.p_perp, "float_list",
+    ParamSpec("projection.a_z_perp_min", lambda m, v: [-INF] * m.p_perp, "float_list",
               "Lower bounds of a_z_perp_hat."),
-    ParamSpec("projection.a_z_perp_max", lambda m: [INF] * m.p_perp, "float_list",
+    ParamSpec("projection.a_z_perp_max", lambda m, v: [INF] * m.p_perp, "float_list",
               "Upper bounds of a_z_perp_hat."),
-    ParamSpec("projection.a_z_min", lambda m: [-INF] * m.p_z, "float_list",
+    ParamSpec("projection.a_z_min", lambda m, v: [-INF] * m.p_z, "float_list",
               "Lower bounds of a_z_hat."),
-    ParamSpec("projection.a_z_max", lambda m: [INF] * m.p_z, "float_list",
+    ParamSpec("projection.a_z_max", lambda m, v: [INF] * m.p_z, "float_list",
               "Upper bounds of a_z_hat."),
-    ParamSpec("projection.a_d_min", lambda m: [-INF] * m.p_d, "float_list",
+    ParamSpec("projection.a_d_min", lambda m, v: [-INF] * m.p_d, "float_list",
               "Lower bounds of a_d_hat."),
-    ParamSpec("projection.a_d_max", lambda m: [INF] * m.p_d, "float_list",
+    ParamSpec("projection.a_d_max", lambda m, v: [INF] * m.p_d, "float_list",
               "Upper bounds of a_d_hat."),
     ParamSpec("projection.min_depth", 0.1, "float",
               "Smallest allowed estimated depth z_hat_i [m].", 1e-6, None),
-    ParamSpec("torque_limit", lambda m: [INF] * m.n, "float_list",
+    ParamSpec("torque_limit", lambda m, v: [INF] * m.n, "float_list",
               "Per-joint |tau| limit [N m]; the command saturates there.", 0.0, None, True),
     ParamSpec("min_singular_value", 0.0, "float",
               "Damp the pseudo-inverse of J* when its smallest singular value drops below "
@@ -169,8 +263,8 @@ CONTROLLER_PARAMS = (
     ParamSpec("safety.camera_timeout", 0.1, "float",
               "No valid feature for this long = stale camera [s].", 1e-3, 60.0, True),
     ParamSpec("safety.recovery_blend_time", 1.0, "float",
-              "When a stale camera comes back, blend x_d in again from the measured feature "
-              "over this time [s].", 0.0, 60.0, True),
+              "When a stale camera comes back, blend the offset between the measured feature and "
+              "x_d out over this time [s].", 0.0, 60.0, True),
     ParamSpec("safety.fallback", "gravity_compensation", "str",
               "After hold_time: gravity_compensation (estimated g(q) - D q_dot) or zero_torque.",
               runtime=True),
@@ -231,22 +325,41 @@ def _check_range(spec, values, where):
             raise ConfigError(f"{where}: must be <= {spec.high}, got {v}")
 
 
-def resolve_params(specs, params, section):
-    """Check names and types of a flat parameter dict, fill defaults; return (model, dict)."""
+def resolve_params(specs, params, section, build_structure):
+    """Check names and types of a flat parameter dict and fill defaults, structure first.
+
+    ``build_structure(values)`` turns the structure parameters into the object the
+    computed defaults need (a model, or the simulator's arm); a ValueError it raises
+    becomes a ConfigError.  Returns ``(structure, values)``.
+    """
     specs_by_name = {s.name: s for s in specs}
     unknown = sorted(set(params) - set(specs_by_name))
     if unknown:
         raise ConfigError(f"{section}: unknown parameter(s) {unknown}")
-    model_name = _to_value(specs_by_name["model"], params.get("model", "paper_rrr"), section)
-    try:
-        model = make_model(model_name)
-    except ValueError as exc:
-        raise ConfigError(f"{section}.{exc}") from None
     values = {}
-    for spec in specs:
-        raw = params.get(spec.name, spec.default_for(model))
+    ordered = ([s for s in specs if s.structure] + [s for s in specs if not s.structure
+                                                    and not s.computed]
+               + [s for s in specs if not s.structure and s.computed])
+    structure = None
+    for spec in ordered:
+        if spec.computed and structure is None:
+            try:
+                structure = build_structure(values)
+            except (ValueError, FileNotFoundError) as exc:
+                text = str(exc)
+                raise ConfigError(text if text.startswith(section) else
+                                  f"{section}.{text}") from None
+        if spec.name in params:
+            raw = params[spec.name]
+        else:
+            try:
+                raw = spec.default_for(structure, values)
+            except ValueError as exc:
+                raise ConfigError(f"{section}.{spec.name}: no default: {exc}") from None
         values[spec.name] = _to_value(spec, raw, section)
-    return model, values
+    if structure is None:
+        structure = build_structure(values)
+    return structure, values
 
 
 def _require_length(values, name, length, section):
@@ -261,9 +374,8 @@ def _require_finite(values, name, section):
 
 @dataclass(frozen=True, eq=False)
 class _ValidatedParams:
-    """A model plus a complete, validated parameter dict, read as attributes or items."""
+    """A complete, validated parameter dict, read as attributes or items."""
 
-    model: RobotCameraModel
     params: dict = field(repr=False)
 
     def __getattr__(self, name):
@@ -275,22 +387,54 @@ class _ValidatedParams:
     def __getitem__(self, name):
         return self.params[name]
 
+
+@dataclass(frozen=True)
+class SimArm:
+    """The simulator's arm as the configuration knows it: the URDF chain and its points."""
+
+    chain: object               # models.urdf_chain.KinematicChain
+    offsets: np.ndarray         # (m, 3) feature offsets in the tip frame [m]
+
     @property
-    def model_name(self):
-        return self.params["model"]
+    def n(self):
+        return self.chain.n
+
+    @property
+    def m(self):
+        return len(self.offsets)
+
+    @property
+    def joint_names(self):
+        return self.chain.joint_names
 
 
+def build_sim_arm(values, section=SIM_SECTION, search_dirs=()):
+    """The simulator's arm (URDF chain and feature offsets) from the structure parameters."""
+    path = resolve_path(values["urdf"], search_dirs, f"{section}.urdf")
+    chain = load_chain(path, values["base_link"], values["tip_link"], section)
+    points = np.asarray(values["feature_points"], dtype=float)
+    if points.size == 0 or points.size % 3:
+        raise ValueError(f"{section}.feature_points: 3 numbers per point, got {points.size}")
+    check_feature_points(points.reshape(-1, 3), chain.n, section)
+    return SimArm(chain, points.reshape(-1, 3))
+
+
+@dataclass(frozen=True, eq=False)
 class SimConfig(_ValidatedParams):
-    """Validated parameters of the simulator (``sim_node``)."""
+    """Validated parameters of the simulator (``sim_node``): the arm, its camera and timing."""
+
+    arm: SimArm = None
+    camera: PinholeCamera = None
 
     @classmethod
-    def from_params(cls, params, section=SIM_SECTION):
-        model, v = resolve_params(SIM_PARAMS, params, section)
+    def from_params(cls, params, section=SIM_SECTION, search_dirs=()):
+        arm, v = resolve_params(SIM_PARAMS, params, section,
+                                lambda values: build_sim_arm(values, section, search_dirs))
         for name in ("initial_positions", "initial_velocities", "joint_names"):
-            _require_length(v, name, model.n, section)
+            _require_length(v, name, arm.n, section)
         for name in ("initial_positions", "initial_velocities"):
             _require_finite(v, name, section)
-        _check_image_bounds(v, section)
+        _require_length(v, "markers.colors", 3 * arm.m, section)
         ratio = v["control_period"] / v["physics_dt"]
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
             raise ConfigError(f"{section}.control_period: must be a whole multiple of "
@@ -298,11 +442,27 @@ class SimConfig(_ValidatedParams):
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
                               f"got {v['timing_mode']!r}")
-        return cls(model, v)
+        camera = _camera(v, "camera.", section)
+        return cls(v, arm, camera)
 
     @property
     def substeps(self):
         return int(round(self.control_period / self.physics_dt))
+
+    @property
+    def image_bounds(self):
+        """[u_min, u_max, v_min, v_max] of the simulated picture in the controller's pixels."""
+        return self.camera.image_bounds
+
+
+def _camera(values, prefix, section):
+    if values[prefix + "orientation"] not in ("look_at", "rpy"):
+        raise ConfigError(f"{section}.{prefix}orientation: must be 'look_at' or 'rpy', got "
+                          f"{values[prefix + 'orientation']!r}")
+    try:
+        return PinholeCamera.from_params(values, prefix, section)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def _check_image_bounds(v, section):
@@ -313,12 +473,41 @@ def _check_image_bounds(v, section):
                           f"got {list(v['image_bounds'])}")
 
 
+def build_controller_model(values, section=CONTROLLER_SECTION, search_dirs=(), model=None):
+    """The controller's model from the structure parameters (``model`` reused if unchanged)."""
+    name = values["model"]
+    if name not in MODEL_NAMES:
+        raise ValueError(f"model: unknown model name {name!r}; known: {list(MODEL_NAMES)}")
+    if model is not None and getattr(model, "structure", None) == _structure_key(values):
+        return model
+    built = make_model(name, values, section, search_dirs)
+    built.structure = _structure_key(values)
+    return built
+
+
+def _structure_key(values):
+    return tuple((k, tuple(v) if isinstance(v, (tuple, np.ndarray)) else v)
+                 for k, v in sorted(values.items()) if k in STRUCTURE_NAMES)
+
+
+@dataclass(frozen=True, eq=False)
 class ControllerConfig(_ValidatedParams):
-    """Validated parameters of the controller (``controller_node``)."""
+    """Validated parameters of the controller (``controller_node``), its model and x_d."""
+
+    model: RobotCameraModel = None
+    trajectory: object = None
+    search_dirs: tuple = ()
+
+    @property
+    def model_name(self):
+        return self.params["model"]
 
     @classmethod
-    def from_params(cls, params, section=CONTROLLER_SECTION):
-        model, v = resolve_params(CONTROLLER_PARAMS, params, section)
+    def from_params(cls, params, section=CONTROLLER_SECTION, search_dirs=(), model=None):
+        """Validate a whole parameter set; ``model`` is reused when its structure is unchanged."""
+        model, v = resolve_params(
+            CONTROLLER_PARAMS, params, section,
+            lambda values: build_controller_model(values, section, search_dirs, model))
         m2 = 2 * model.m
         lengths = {"K": m2, "Gamma_d": model.p_d, "Gamma_z_perp": model.p_perp,
                    "Gamma_z": model.p_z, "a_z_perp_init": model.p_perp, "a_z_init": model.p_z,
@@ -360,7 +549,32 @@ class ControllerConfig(_ValidatedParams):
             if v["projection.enabled"] and np.any((init < lo) | (init > hi)):
                 raise ConfigError(f"{section}.{name}_init: must lie within "
                                   f"projection.{name}_min/_max, got {list(init)}")
-        return cls(model, v)
+        trajectory = _trajectory(v, model.m, section, search_dirs)
+        return cls(v, model, trajectory, tuple(search_dirs))
+
+    def with_changes(self, **changes):
+        """A new, whole-validated configuration with some parameters changed (same model)."""
+        params = dict(self.params)
+        params.update(changes)
+        return ControllerConfig.from_params(params, search_dirs=self.search_dirs,
+                                            model=self.model)
+
+
+def _trajectory(v, m, section, search_dirs):
+    kind = v["trajectory.type"]
+    if kind == "sinusoid":
+        return SinusoidTrajectory(v["trajectory.offset"], v["trajectory.a_cos"],
+                                  v["trajectory.a_sin"], v["trajectory.omega"])
+    if kind == "table":
+        try:
+            path = resolve_path(v["trajectory.file"], search_dirs, f"{section}.trajectory.file")
+            return TabulatedTrajectory.from_csv(path, m)
+        except (FileNotFoundError, ValueError) as exc:
+            text = str(exc)
+            raise ConfigError(text if text.startswith(section) else
+                              f"{section}.trajectory.file: {text}") from None
+    raise ConfigError(f"{section}.trajectory.type: must be one of {list(TRAJECTORY_TYPES)}, "
+                      f"got {kind!r}")
 
 
 def check_alpha_gamma(alpha, gamma, section=CONTROLLER_SECTION):
@@ -438,13 +652,69 @@ class Scenario:
 
 
 def load_scenario(path, overrides=(), edit: Callable[[dict], None] | None = None):
-    """Read, override and validate a parameter file; both sections or nothing."""
+    """Read, override and validate a parameter file; both sections or nothing.
+
+    File names inside (URDFs, trajectory tables) may be relative to the file's
+    folder.  The controller's model gets the simulator's camera and arm as its
+    ground truth, and the start is checked: every feature point in front of the
+    camera and inside both the picture and the controller's ``image_bounds``,
+    the true and the estimated image Jacobian of full row rank (Assumption 2).
+    """
     sections = apply_overrides(read_param_file(path), overrides)
     if edit is not None:
         edit(sections)
-    sim = SimConfig.from_params(sections[SIM_SECTION])
-    ctrl = ControllerConfig.from_params(sections[CONTROLLER_SECTION])
-    if sim.model.__class__ is not ctrl.model.__class__:
-        raise ConfigError(f"controller_node.model: must match sim_node.model "
-                          f"({sim.params['model']!r}), got {ctrl.params['model']!r}")
+    search_dirs = (os.path.dirname(os.path.abspath(path)),)
+    sim = SimConfig.from_params(sections[SIM_SECTION], search_dirs=search_dirs)
+    ctrl = ControllerConfig.from_params(sections[CONTROLLER_SECTION], search_dirs=search_dirs)
+    model = ctrl.model
+    if (model.n, model.m) != (sim.arm.n, sim.arm.m):
+        raise ConfigError(f"controller_node.model: describes {model.n} joints and {model.m} "
+                          f"point(s); the simulated arm (sim_node.urdf, feature_points) has "
+                          f"{sim.arm.n} and {sim.arm.m}")
+    if tuple(ctrl.joint_names) != tuple(sim.joint_names):
+        raise ConfigError(f"controller_node.joint_names: must equal sim_node.joint_names "
+                          f"{list(sim.joint_names)}, got {list(ctrl.joint_names)}")
+    try:
+        model.set_ground_truth(sim.camera.projection_matrix, sim.arm.chain, sim.arm.offsets)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    check_start(sim, ctrl)
     return Scenario(sim, ctrl)
+
+
+def check_start(sim, ctrl):
+    """The start-up checks of :func:`load_scenario` (ConfigError naming what fails)."""
+    q0 = np.asarray(sim.initial_positions, dtype=float)
+    points = sim.arm.chain.points(q0, sim.arm.offsets)
+    root = sim.arm.chain.root_to_base
+    pixels, depth = sim.camera.project(points @ root[:3, :3].T + root[:3, 3])
+    behind = [i + 1 for i, z in enumerate(depth.tolist()) if not z > 0.0]
+    if behind:
+        raise ConfigError(f"sim_node.initial_positions: feature point(s) {behind} behind the "
+                          f"camera at the start (depths {np.round(depth, 3).tolist()} m); move "
+                          f"sim_node.camera or the start pose")
+    for section, bounds in ((SIM_SECTION + ".camera", sim.image_bounds),
+                            (CONTROLLER_SECTION + ".image_bounds", ctrl.image_bounds)):
+        u0, u1, v0, v1 = bounds
+        outside = [i + 1 for i, (u, v) in enumerate(pixels.reshape(-1, 2).tolist())
+                   if not (u0 <= u <= u1 and v0 <= v <= v1)]
+        if outside:
+            raise ConfigError(f"sim_node.initial_positions: feature point(s) {outside} outside "
+                              f"the image at the start (pixels {np.round(pixels, 1).tolist()}, "
+                              f"{section} {list(bounds)})")
+    model = ctrl.model
+    tensors = model.kinematic_tensors(q0, np.zeros(model.n))
+    _, dH, _, W, _ = tensors
+    for what, a_perp, a_z in (("true", model.a_z_perp, model.a_z),
+                              ("estimated", ctrl.a_z_perp_init, ctrl.a_z_init)):
+        J = model.image_jacobian(W, dH, pixels, np.asarray(a_perp), np.asarray(a_z))
+        sv = np.linalg.svd(J, compute_uv=False)
+        if sv[-1] <= 1e-9 * max(sv[0], 1e-300):
+            hint = ("the initial estimates (controller_node.a_z_perp_init/a_z_init or "
+                    "initial_estimate.*)" if what == "estimated" else
+                    "the camera and the points (sim_node.camera, feature_points)")
+            raise ConfigError(f"sim_node.initial_positions: the {what} image Jacobian J(q, x) "
+                              f"at the start has rank {int(np.sum(sv > 1e-9 * sv[0]))} < "
+                              f"{2 * model.m} (singular values {np.round(sv, 6).tolist()}): "
+                              f"Assumption 2 of the paper fails here; change the start pose or "
+                              f"{hint}")

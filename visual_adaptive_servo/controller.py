@@ -37,7 +37,7 @@ from math import isfinite, sqrt
 import numpy as np
 
 from .config import ControllerConfig, check_alpha_gamma
-from .trajectory import BlendedStart, SinusoidTrajectory
+from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
 
@@ -393,8 +393,9 @@ class AdaptiveVisualTracker:
     over the time since the last accepted sample, using the rates computed there;
     the interval is clamped to ``max_dt`` so a long gap cannot make one huge step.
 
-    Start: x_o(0) = x(0); x_d is blended in from x(0) over ``start_blend_time``
-    (0 keeps the paper's start on the trajectory).
+    Start: x_o(0) = x(0); the offset x(0) - x_d(0) is blended out over
+    ``start_blend_time`` (:class:`~.trajectory.BlendedStart`), so the start is
+    smooth from anywhere and unchanged when it is on the trajectory.
 
     Bad input (missing, NaN/inf, wrong size, outside the image, time going
     backwards) rejects the sample: nothing is committed; the last valid command
@@ -403,16 +404,14 @@ class AdaptiveVisualTracker:
     estimate a_d_hat, or ``zero_torque``; with an invalid joint state, zero
     torque).  When the camera has been stale for ``safety.camera_timeout`` and
     comes back, the observer restarts at the measured x and x_d is blended in
-    again from there, so recovery has no jump.
+    again from there (the offset blended out over ``safety.recovery_blend_time``),
+    so recovery has no jump.
     """
 
     def __init__(self, config: ControllerConfig):
         self.config = config
         self.model = config.model
-        self.trajectory = SinusoidTrajectory(config["trajectory.offset"],
-                                             config["trajectory.a_cos"],
-                                             config["trajectory.a_sin"],
-                                             config["trajectory.omega"])
+        self.trajectory = config.trajectory
         self.gains = Gains(config.K, config.alpha, config.gamma, config.Gamma_d,
                            config.Gamma_z_perp, config.Gamma_z)
         self.projection = (Projection(config["projection.a_z_perp_min"],
@@ -439,9 +438,7 @@ class AdaptiveVisualTracker:
 
     def update_gains(self, **changes):
         """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
-        params = dict(self.config.params)
-        params.update(changes)
-        new_config = ControllerConfig.from_params(params)
+        new_config = self.config.with_changes(**changes)
         self.config = new_config
         self.gains = Gains(new_config.K, new_config.alpha, new_config.gamma, new_config.Gamma_d,
                            new_config.Gamma_z_perp, new_config.Gamma_z)
@@ -497,7 +494,8 @@ class AdaptiveVisualTracker:
             state = replace(self.state, x_obs=x.copy())
             blend = (self.config.start_blend_time if self.t_last is None
                      else self.config["safety.recovery_blend_time"])
-            desired = BlendedStart(self.trajectory, x.copy(), t, blend)
+            desired = BlendedStart.from_measurement(self.trajectory, x, t, blend,
+                                                    self.config["start_tolerance"])
         else:
             desired = self.desired
             dt = min(t - self.t_last, self.config["max_dt"])

@@ -62,7 +62,13 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from . import messages as m
-from .config import CONTROLLER_PARAMS, CONTROLLER_SECTION, ConfigError, ControllerConfig
+from .config import (
+    CONTROLLER_PARAMS,
+    CONTROLLER_SECTION,
+    ConfigError,
+    ControllerConfig,
+    build_controller_model,
+)
 from .controller import AdaptiveVisualTracker, health
 from .ros_params import declare_schema, from_ros
 
@@ -93,8 +99,14 @@ class ControllerNode(Node):
     def __init__(self, **kwargs):
         super().__init__("controller_node", **kwargs)
         self.specs = {spec.name: spec for spec in CONTROLLER_PARAMS}
-        params = declare_schema(self, CONTROLLER_PARAMS, CONTROLLER_SECTION)
-        config = ControllerConfig.from_params(params)
+        built = {}   # the model is built once, while the parameters are declared
+
+        def build(values):
+            built["model"] = build_controller_model(values)
+            return built["model"]
+
+        params = declare_schema(self, CONTROLLER_PARAMS, CONTROLLER_SECTION, build)
+        config = ControllerConfig.from_params(params, model=built.get("model"))
         self.tracker = AdaptiveVisualTracker(config)
         self.joint_names = list(config.joint_names)
         self.labels = m.parameter_labels(config.model)

@@ -90,10 +90,10 @@ class Case:
         path = os.path.join(PACKAGE_ROOT, "config", self.config)
         scenario = load_scenario(path, self.overrides)
         if self.start_offset_px:
-            sim = scenario.sim
-            x0 = sim.model.project(np.array(sim.initial_positions))[0]
-            direction = np.array([0.6, -0.8])
-            q0 = joints_seeing(sim.model, x0 + self.start_offset_px * direction,
+            sim, model = scenario.sim, scenario.controller.model
+            x0 = model.project(np.array(sim.initial_positions))[0]
+            direction = np.tile([0.6, -0.8], model.m)
+            q0 = joints_seeing(model, x0 + self.start_offset_px * direction,
                                sim.initial_positions)
             scenario = load_scenario(path, self.overrides + (
                 f"sim_node.initial_positions={q0.tolist()}",))

@@ -14,8 +14,10 @@
 
 """Declaring a parameter schema (:class:`config.ParamSpec`) on an rclpy node.
 
-Used by both nodes.  ``model`` is declared first, because the defaults of the
-others (list lengths) depend on the model it names.  Every parameter gets a
+Used by both nodes.  The structure parameters (``model``, ``urdf``,
+``feature_points``, ...) are declared first, because the defaults of the
+others (list lengths, initial estimates) depend on the model they define;
+parameters with computed defaults come last, after the ones they read.  Every parameter gets a
 ``ParameterDescriptor`` with the schema's description, a range where the
 schema has bounds (scalars only: ROS ranges do not apply to arrays, so the
 bounds of a list are stated in its description and checked by
@@ -35,7 +37,6 @@ from rcl_interfaces.msg import (
 from rclpy.exceptions import ParameterException
 
 from .config import ConfigError
-from .model import make_model
 
 PARAMETER_TYPES = {
     "float": ParameterType.PARAMETER_DOUBLE,
@@ -91,29 +92,33 @@ def from_ros(spec, value):
     return value
 
 
-def declare_schema(node, specs, section):
+def declare_schema(node, specs, section, build_structure=None):
     """Declare ``specs`` on ``node``; return the flat {name: value} it ends up with.
 
+    ``build_structure(values)`` makes the object computed defaults need (the
+    model, or the simulator's arm) from the structure parameters declared so far.
     Raises ConfigError (naming ``section.parameter`` and the rule) when a
-    parameter override has the wrong type, is out of range, or names an
-    unknown model.
+    parameter override has the wrong type, is out of range, or the structure
+    cannot be built.
     """
-    by_name = {spec.name: spec for spec in specs}
-    model_spec = by_name["model"]
-    try:
-        name = node.declare_parameter("model", model_spec.default, descriptor(model_spec)).value
-        model = make_model(name)
-    except ValueError as exc:
-        raise ConfigError(f"{section}.{exc}") from None
-    except ParameterException as exc:
-        raise ConfigError(f"{section}.model: {exc}") from None
-    values = {"model": name}
-    for spec in specs:
-        if spec.name == "model":
-            continue
+    ordered = ([s for s in specs if s.structure] + [s for s in specs if not s.structure
+                                                    and not s.computed]
+               + [s for s in specs if not s.structure and s.computed])
+    values, structure = {}, None
+    for spec in ordered:
+        if spec.computed and structure is None and build_structure is not None:
+            try:
+                structure = build_structure(dict(values))
+            except (ValueError, FileNotFoundError) as exc:
+                text = str(exc)
+                raise ConfigError(text if text.startswith(section) else
+                                  f"{section}.{text}") from None
         try:
-            param = node.declare_parameter(spec.name, to_ros(spec, spec.default_for(model)),
-                                           descriptor(spec))
+            default = spec.default_for(structure, values)
+        except ValueError as exc:
+            raise ConfigError(f"{section}.{spec.name}: no default: {exc}") from None
+        try:
+            param = node.declare_parameter(spec.name, to_ros(spec, default), descriptor(spec))
         except ParameterException as exc:
             raise ConfigError(f"{section}.{spec.name}: {exc}") from None
         values[spec.name] = from_ros(spec, param.value)

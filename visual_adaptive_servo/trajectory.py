@@ -12,14 +12,24 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Desired image trajectories x_d(t) with their first and second derivatives."""
+"""Desired image trajectories x_d(t) with their first and second derivatives.
+
+* :class:`SinusoidTrajectory`: the paper's circle (and any per-coordinate sinusoid);
+* :class:`TabulatedTrajectory`: a CSV of t, u_1, v_1, ..., u_m, v_m interpolated by a
+  C2 cubic spline (for m > 1 an arbitrary image curve is not realisable: three points
+  fix a pose; a taught trajectory, ``vas teach``, is);
+* :class:`BlendedStart`: the safe start, the initial offset blended out.
+"""
 
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass
 from math import cos, sin
 
 import numpy as np
+
+TRAJECTORY_TYPES = ("sinusoid", "table")
 
 
 @dataclass(frozen=True)
@@ -68,28 +78,113 @@ def quintic_blend(tau):
     return sigma, sigma_d, sigma_dd
 
 
-@dataclass(frozen=True)
-class BlendedStart:
-    """Blend from a held start point into a trajectory over ``duration`` seconds.
+class TabulatedTrajectory:
+    """x_d(t) from samples (t_k, x_k), a C2 cubic spline through them.
 
-    x_d(t) = (1 - sigma) x_start + sigma x_traj(t) with sigma the quintic of
-    (t - t_start) / duration, so x_d(t_start) = x_start with zero velocity and
-    acceleration, and x_d equals the trajectory from t_start + duration on.
+    A table whose last row equals its first (to 1e-9 px) is periodic and repeats
+    with period t_last - t_0 (periodic spline: C2 across the seam); any other table
+    uses a clamped spline (zero velocity at both ends) and holds its last point
+    after the end.  Times start at 0 and increase strictly.
+
+    Parameters
+    ----------
+    t : (N,) times [s]
+    x : (N, 2m) pixels
     """
 
-    trajectory: SinusoidTrajectory
+    def __init__(self, t, x, source="trajectory"):
+        from scipy.interpolate import CubicSpline
+
+        t = np.asarray(t, dtype=float)
+        x = np.asarray(x, dtype=float)
+        if x.ndim != 2 or len(t) != len(x) or len(t) < 4:
+            raise ValueError(f"{source}: needs at least 4 rows of t and 2m pixel columns")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(x))):
+            raise ValueError(f"{source}: contains NaN or inf")
+        if t[0] != 0.0 or np.any(np.diff(t) <= 0.0):
+            raise ValueError(f"{source}: times must start at 0 and increase strictly")
+        self.periodic = bool(np.max(np.abs(x[-1] - x[0])) <= 1e-9)
+        if self.periodic:
+            x = x.copy()
+            x[-1] = x[0]
+        self.spline = CubicSpline(t, x, bc_type="periodic" if self.periodic else "clamped")
+        self.t_end = float(t[-1])
+        self.source = source
+
+    @classmethod
+    def from_csv(cls, path, m):
+        """Read ``t, u1, v1, ..., um, vm`` (header row optional) for m feature points."""
+        rows = []
+        with open(path, newline="", encoding="utf-8") as handle:
+            for k, row in enumerate(csv.reader(handle)):
+                if not row or row[0].lstrip().startswith("#"):
+                    continue
+                try:
+                    rows.append([float(v) for v in row])
+                except ValueError:
+                    if rows or k > 0:
+                        raise ValueError(f"{path}: line {k + 1} is not numbers: {row}") from None
+        table = np.array(rows, dtype=float)
+        if table.ndim != 2 or table.shape[1] != 1 + 2 * m:
+            raise ValueError(f"{path}: needs {1 + 2 * m} columns (t, u1, v1, ...) for {m} "
+                             f"point(s), got {table.shape[1] if table.ndim == 2 else 0}")
+        return cls(table[:, 0], table[:, 1:], source=str(path))
+
+    def __call__(self, t):
+        """Return (x_d, x_d_dot, x_d_ddot) at time t, each (2m,)."""
+        if self.periodic:
+            t = t % self.t_end
+        elif t >= self.t_end:
+            x = self.spline(self.t_end)
+            return x, np.zeros_like(x), np.zeros_like(x)
+        t = max(t, 0.0)
+        return self.spline(t), self.spline(t, 1), self.spline(t, 2)
+
+
+@dataclass(frozen=True)
+class BlendedStart:
+    """Start from where the feature is: the initial offset to the trajectory blended out.
+
+    ``x_d(t) = x_traj(t) + (1 - sigma) (x_start - x_traj(t_start))`` with sigma the
+    quintic of ``(t - t_start) / duration``: x_d starts at the measured point, its
+    velocity and acceleration follow the trajectory's plus those of the fading
+    offset (zero at both ends of the blend), and it equals the trajectory from
+    ``t_start + duration`` on.  When the start is on the trajectory the offset is
+    zero and x_d *is* the trajectory (the paper's run is unchanged); with
+    ``duration`` 0 there is no blend.
+    """
+
+    trajectory: object
     x_start: np.ndarray
     t_start: float
     duration: float
+
+    def __post_init__(self):
+        offset = np.asarray(self.x_start, dtype=float) - self.trajectory(self.t_start)[0]
+        object.__setattr__(self, "_offset", offset)
+
+    @classmethod
+    def from_measurement(cls, trajectory, x, t, duration, tolerance):
+        """The blend from the measured ``x`` at ``t``, or ``trajectory`` itself when x is on it.
+
+        "On it" means every coordinate within ``tolerance`` [px] of x_d(t): such an
+        offset is far below any camera's resolution, and not blending it keeps a run
+        that starts on the trajectory exactly that run (the paper's start,
+        q(0) = (1.0807, 0.5756, -0.5), is 0.0036 px off x_d(0)).
+        """
+        offset = np.asarray(x, dtype=float) - trajectory(t)[0]
+        if duration <= 0.0 or max(np.abs(offset).tolist()) <= tolerance:
+            return trajectory
+        return cls(trajectory, np.array(x, dtype=float), t, duration)
 
     def __call__(self, t):
         x, xd, xdd = self.trajectory(t)
         if self.duration <= 0.0:
             return x, xd, xdd
-        sigma, sd, sdd = quintic_blend((t - self.t_start) / self.duration)
-        sd /= self.duration
-        sdd /= self.duration**2
-        diff = x - self.x_start
-        return (self.x_start + sigma * diff,
-                sd * diff + sigma * xd,
-                sdd * diff + 2.0 * sd * xd + sigma * xdd)
+        tau = (t - self.t_start) / self.duration
+        if tau >= 1.0:
+            return x, xd, xdd
+        sigma, sd, sdd = quintic_blend(tau)
+        fade = self._offset
+        return (x + (1.0 - sigma) * fade, xd - (sd / self.duration) * fade,
+                xdd - (sdd / self.duration**2) * fade)

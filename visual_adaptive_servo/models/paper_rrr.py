@@ -12,151 +12,22 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Robot + fixed-camera models: the regressors of Properties 1 and 4 of the paper.
 
-A model owns the structure of the kinematics, the camera and the dynamics, and
-exposes everything the controller needs as *regressors* that are linear in the
-unknown parameters:
+"""The paper's RRR arm and fixed camera (H. Wang, Automatica 2015, section 4), by hand.
 
-=====================  ========================================================
-``a_z``  (p_z,)        depth parameters:          z(q) = H(q) a_z
-``a_z_perp`` (p_perp,) depth-rate-independent:    J_z_perp(q) q_dot = Y_z_perp a_z_perp
-``a_d`` (p_d,)         dynamic parameters:        M xi_dot + C xi + g = Y_d a_d
-=====================  ========================================================
-
-The kinematic structure is given by three tensors whose layout makes every
-contraction a single ``@``:
-
-* ``H(q)``      (m, p_z):         depth regressor, ``z = H @ a_z``
-* ``dH(q)``     (m, n, p_z):      its joint gradient, ``J_z = dH @ a_z`` (m, n)
-* ``W(q)``      (2m, n, p_perp):  ``J_z_perp = W @ a_z_perp`` (2m, n)
-
-plus their time derivatives along ``q_dot`` (needed by the total derivatives
-in eq (19)).  From these, :class:`RobotCameraModel` derives the paper's
-``Y_z``, ``Y_z_bar``, ``Y_z_perp`` and the estimated Jacobian of eq (a1).
-
-The controller never sees the true parameters; they live on the model only so
-that the simulator and the tests have ground truth.
+The kinematic tensors and the dynamic regressor are derived in closed form for
+this arm; :class:`~.urdf_arm.UrdfArmCamera` computes the same quantities for any
+serial arm from its URDF, and the tests check the two against each other.
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from math import cos, sin
 
 import numpy as np
 
-GRAVITY = 9.81  # m/s^2
-
-
-class RobotCameraModel(ABC):
-    """Structure of an n-joint arm seen by a fixed pinhole camera (m feature points).
-
-    Subclasses implement the abstract tensors; everything else is derived here
-    once, so that a new robot only has to provide its kinematic and dynamic
-    regressors.
-    """
-
-    #: joints, feature points, and the parameter counts (p_perp, p_z, p_d)
-    n: int
-    m: int
-    p_perp: int
-    p_z: int
-    p_d: int
-    #: ground truth (for the simulator and tests only)
-    a_z_perp: np.ndarray
-    a_z: np.ndarray
-    a_d: np.ndarray
-    #: labels used by diagnostics and the parameter topic
-    a_z_perp_labels: tuple[str, ...]
-    a_z_labels: tuple[str, ...]
-    a_d_labels: tuple[str, ...]
-
-    # -- structure supplied by a concrete model --------------------------------
-    @abstractmethod
-    def kinematic_tensors(self, q, qd):
-        """Return ``(H, dH, dH_rate, W, W_rate)`` at ``(q, q_dot)``.
-
-        Shapes: H (m, p_z), dH and dH_rate (m, n, p_z), W and W_rate
-        (2m, n, p_perp); ``*_rate`` is the time derivative along ``q_dot``.
-        One call so that a model can share trigonometry between them.
-        """
-
-    @abstractmethod
-    def dynamic_regressor(self, q, qd, xi, xi_dot):
-        """Y_d(q, q_dot, xi, xi_dot) (n, p_d) of eq (7): M xi_dot + C xi + g = Y_d a_d."""
-
-    @abstractmethod
-    def feature_positions(self, q):
-        """True feature points r_i in the robot base frame, (m, 3)."""
-
-    @abstractmethod
-    def project(self, q):
-        """True image coordinates x (2m,) in pixels and depths z (m,) at q."""
-
-    @abstractmethod
-    def mass_matrix(self, q):
-        """True inertia matrix M(q) (n, n)."""
-
-    @abstractmethod
-    def coriolis_matrix(self, q, qd):
-        """True Christoffel-form C(q, q_dot) (n, n), with M_dot - 2C skew-symmetric."""
-
-    @abstractmethod
-    def gravity_torque(self, q):
-        """True gravity torque g(q) (n,)."""
-
-    # -- Property 1, derived ----------------------------------------------------
-    def depth(self, q, a_z):
-        """z(q; a_z) = H(q) a_z, shape (m,)."""
-        H = self.kinematic_tensors(q, np.zeros(self.n))[0]
-        return H @ a_z
-
-    def Y_z(self, H, psi):
-        """Y_z(q, psi) (2m, p_z) with Z(q) psi = Y_z a_z, from ``H(q)``."""
-        return (psi.reshape(self.m, 2)[:, :, None] * H[:, None, :]).reshape(2 * self.m, self.p_z)
-
-    def Y_z_bar(self, H_rate, phi):
-        """Y_z_bar(q, q_dot, phi) (2m, p_z) with Z_dot phi = Y_z_bar a_z, from ``H_dot``."""
-        return self.Y_z(H_rate, phi)
-
-    @staticmethod
-    def Y_z_perp(W, qd):
-        """Y_z_perp(q, q_dot) (2m, p_perp) with J_z_perp q_dot = Y_z_perp a_z_perp."""
-        return np.asarray(qd).dot(W)  # = qd @ W; dot is the cheaper call on tiny arrays
-
-    def image_jacobian(self, W, dH, u, a_z_perp, a_z):
-        """J(q, u) = J_z_perp(q) - U J_z(q) of eq (a1), shape (2m, n).
-
-        ``U = diag(u_i)`` stacks the 2-vectors ``u_i`` block-diagonally (2m, m),
-        so row ``2i + k`` of ``U J_z`` is ``u_i[k] * J_z[i]``.
-        """
-        J_z = dH @ a_z  # (m, n)
-        return W @ a_z_perp - u[:, None] * np.repeat(J_z, 2, axis=0)
-
-    def true_image_jacobian(self, q, x):
-        """True depth-independent image Jacobian J(q, x) (2m, n)."""
-        _, dH, _, W, _ = self.kinematic_tensors(q, np.zeros(self.n))
-        return self.image_jacobian(W, dH, x, self.a_z_perp, self.a_z)
-
-
-def _lagrangian_regressor(M_basis, dM_basis, g_basis, qd, xi, xi_dot):
-    """Y_d for dynamics written as M = sum_k a_k M_k(q), g = sum_k a_k g_k(q).
-
-    C is built from the Christoffel symbols of the first kind, column by column:
-    ``(C_k xi)_i = 1/2 sum_{j,l} (dM_k[i,j]/dq_l + dM_k[i,l]/dq_j - dM_k[j,l]/dq_i) qd_l xi_j``
-    so that M_dot - 2C is skew-symmetric (Property 3).
-
-    Shapes: M_basis (p, n, n), dM_basis (p, n, n, n) with the last index the
-    joint differentiated, g_basis (p, n).  Returns (n, p).
-    """
-    M_dot = dM_basis @ qd                   # (p, n, n): dM_k[i,j]/dq_l qd_l
-    term1 = M_dot @ xi                      # sum_{j,l} dM[i,j]/dq_l qd_l xi_j
-    term2 = (dM_basis @ xi) @ qd            # sum_{j,l} dM[i,l]/dq_j xi_j qd_l
-    term3 = (dM_basis.transpose(0, 3, 1, 2) @ qd) @ xi  # sum dM[j,l]/dq_i qd_l xi_j
-    cols = M_basis @ xi_dot + 0.5 * (term1 + term2 - term3) + g_basis
-    return cols.T
+from .base import GRAVITY, RobotCameraModel, _lagrangian_regressor
 
 
 @dataclass(frozen=True)
@@ -341,6 +212,54 @@ class PaperRRRCamera(RobotCameraModel):
         return _lagrangian_regressor(M, dM, g, np.asarray(qd, float), np.asarray(xi, float),
                                      np.asarray(xi_dot, float))
 
+    @property
+    def camera_matrix(self):
+        """The paper's camera as a projection matrix (3, 4) in the base frame."""
+        fb = self.focal_length * self.scale
+        return np.array([[0.0, fb, 0.0, 0.0], [0.0, 0.0, fb, 0.0],
+                         [1.0, 0.0, 0.0, self.camera_distance]])
+
+    @staticmethod
+    def _paper_camera(camera_matrix, what):
+        """(f beta, d_C) of a projection matrix with the paper's camera structure."""
+        P = np.asarray(camera_matrix, dtype=float)
+        fb = float(P[0, 1])
+        expected = np.array([[0.0, fb, 0.0, 0.0], [0.0, 0.0, fb, 0.0], [1.0, 0.0, 0.0, P[2, 3]]])
+        if P.shape != (3, 4) or fb <= 0.0 or not np.allclose(P, expected, rtol=0.0,
+                                                             atol=1e-9 * max(1.0, fb)):
+            raise ValueError(
+                f"{what}: model paper_rrr assumes the paper's camera (Z_C along X_0, image axes "
+                f"along Y_0 and Z_0, equal pixel scales, pixel origin on the optical axis); got "
+                f"the projection matrix {np.round(P, 6).tolist()}. Use model: urdf for any "
+                f"other camera")
+        return fb, float(P[2, 3])
+
+    def estimate(self, camera_matrix, length_scale=1.0, inertia_scale=1.0):
+        fb, d_C = self._paper_camera(camera_matrix, "initial_estimate.camera")
+        l2, l3 = (link.length * length_scale for link in self.links[1:])
+        return (np.array([fb * l2, fb * l3]), np.array([l2, l3, d_C]),
+                inertia_scale * self._dynamic_parameters())
+
+    def set_ground_truth(self, camera_matrix, chain=None, offsets=None):
+        fb, d_C = self._paper_camera(camera_matrix, "sim_node.camera")
+        if offsets is not None and np.any(np.asarray(offsets, dtype=float) != 0.0):
+            raise ValueError("sim_node.feature_points: model paper_rrr has its one feature point "
+                             "at the tip (offset [0, 0, 0]); use model: urdf for others")
+        if chain is not None:
+            lengths = [chain.joints[1].origin_translation, chain.joints[2].origin_translation,
+                       chain.tip_translation]
+            expected = [(0.0, 0.0, self.l1), (self.links[1].length, 0.0, 0.0),
+                        (self.links[2].length, 0.0, 0.0)]
+            if chain.n != 3 or not np.allclose(lengths, expected, atol=1e-12):
+                raise ValueError(f"sim_node.urdf: model paper_rrr is the paper's arm (l1 = "
+                                 f"{self.l1}, l2 = {self.links[1].length}, l3 = "
+                                 f"{self.links[2].length} m); {chain.urdf} differs. Use model: "
+                                 f"urdf for another arm")
+        self.focal_length = fb / self.scale
+        self.camera_distance = d_C
+        self.a_z_perp = np.array([fb * self.links[1].length, fb * self.links[2].length])
+        self.a_z = np.array([self.links[1].length, self.links[2].length, d_C])
+
     def feature_positions(self, q):
         q1, q2, q3 = q
         l2, l3 = self.links[1].length, self.links[2].length
@@ -367,15 +286,3 @@ class PaperRRRCamera(RobotCameraModel):
     def gravity_torque(self, q):
         _, _, g = self._dynamic_basis(q)
         return self.a_d @ g
-
-
-MODELS = {"paper_rrr": PaperRRRCamera}
-
-
-def make_model(name, **kwargs):
-    """Build a registered model by name (``model`` parameter of the configuration)."""
-    try:
-        cls = MODELS[name]
-    except KeyError:
-        raise ValueError(f"model: unknown model name {name!r}; known: {sorted(MODELS)}") from None
-    return cls(**kwargs)

@@ -1,0 +1,255 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The simulated cameras: a general pinhole camera and the feature camera built on it.
+
+ROS-free, numpy only.
+
+Conventions
+-----------
+* Camera frame as in OpenCV: X_C to the right of the picture, Y_C down, Z_C
+  along the optical axis.  ``rotation`` has the camera axes as rows, in world
+  coordinates; ``position`` is the camera centre in the world.
+* Raw image coordinates (what a real sensor gives): ``col = f beta_x X_C / Z_C + c_x``,
+  ``row = f beta_y Y_C / Z_C + c_y``, continuous, with (0, 0) the top-left
+  corner of the top-left pixel; the picture is ``width`` x ``height`` pixels.
+* The controller's pixels: ``x = pixel_axes * ([col, row] - pixel_origin)``,
+  per coordinate, with each axis +-1.  A standard camera uses origin (0, 0) and
+  axes (1, 1).  The paper's camera uses origin (320, 240) and axes (-1, -1):
+  pixels measured from the optical axis, u to the left and v up in the
+  picture, so that ``x = f beta [r_y, r_z] / (r_x + d_C)`` exactly as in
+  section 4 of the paper.  The controller never needs to know this map (any
+  fixed affine change of pixel coordinates is absorbed by the unknown
+  projection); the feature detector uses it to report pixels in this
+  convention.
+* Depth z = Z_C in metres.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+CAMERA_KEYS = ("position", "look_at", "up", "rpy", "focal_length", "pixel_scale",
+               "principal_point", "image_size", "pixel_origin", "pixel_axes")
+
+
+def _rpy_matrix(rpy):
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """A fixed pinhole camera (see the module docstring for every convention).
+
+    Parameters
+    ----------
+    rotation : (3, 3)
+        Rows X_C, Y_C, Z_C in world coordinates (orthonormal, right-handed).
+    position : (3,)
+        Camera centre in the world [m].
+    fx, fy : float
+        Focal length times pixel scale per axis, f beta_x and f beta_y [px].
+    cx, cy : float
+        Principal point in raw image coordinates [px].
+    width, height : int
+        Picture size [px].
+    pixel_origin, pixel_axes : (2,)
+        The map from raw image coordinates to the controller's pixels.
+    """
+
+    rotation: np.ndarray
+    position: np.ndarray
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    pixel_origin: tuple = (0.0, 0.0)
+    pixel_axes: tuple = (1.0, 1.0)
+
+    def __post_init__(self):
+        R = np.asarray(self.rotation, dtype=float)
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) \
+                or np.linalg.det(R) < 0.0:
+            raise ValueError(f"camera rotation: must be a rotation matrix, got {R.tolist()}")
+        object.__setattr__(self, "_P", self._projection())
+
+    def _projection(self):
+        R = np.asarray(self.rotation, dtype=float)
+        c = np.asarray(self.position, dtype=float)
+        K = np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+        raw = K @ np.hstack([R, (-R @ c)[:, None]])
+        axes, origin = np.asarray(self.pixel_axes, float), np.asarray(self.pixel_origin, float)
+        P = raw.copy()
+        P[:2] = axes[:, None] * (raw[:2] - origin[:, None] * raw[2])
+        return P
+
+    @property
+    def projection_matrix(self):
+        """P (3, 4): ``[x * z, z] = P [r, 1]`` in the controller's pixels, z in metres."""
+        return self._P.copy()
+
+    def project(self, points):
+        """Controller pixels (2m,) and depths (m,) of world points (m, 3).
+
+        A point on or behind the camera plane gets inf/NaN pixels and depth <= 0.
+        """
+        h = np.asarray(points, dtype=float).dot(self._P[:, :3].T) + self._P[:, 3]
+        z = h[:, 2]
+        if min(z.tolist()) > 0.0:
+            uv = h[:, :2] / h[:, 2:]
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = h[:, :2] / h[:, 2:]
+        return uv.reshape(-1), z
+
+    def to_raw(self, pixels):
+        """Raw image coordinates (m, 2) [col, row] of controller pixels (2m,)."""
+        uv = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        return uv / np.asarray(self.pixel_axes, float) + np.asarray(self.pixel_origin, float)
+
+    @property
+    def image_bounds(self):
+        """[u_min, u_max, v_min, v_max] of the picture in the controller's pixels."""
+        corners = self.to_pixels(np.array([[0.0, 0.0], [self.width, self.height]]))
+        u, v = corners[0::2], corners[1::2]
+        return np.array([u.min(), u.max(), v.min(), v.max()])
+
+    def to_pixels(self, raw):
+        """Controller pixels (2m,) of raw image coordinates (m, 2)."""
+        raw = np.asarray(raw, dtype=float).reshape(-1, 2)
+        return (np.asarray(self.pixel_axes, float)
+                * (raw - np.asarray(self.pixel_origin, float))).reshape(-1)
+
+    # -- constructors ---------------------------------------------------------------
+    @classmethod
+    def look_at(cls, position, target, up, fx, fy, cx, cy, width, height,
+                pixel_origin=(0.0, 0.0), pixel_axes=(1.0, 1.0)):
+        """Camera at ``position`` looking at ``target``, ``up`` pointing up in the picture."""
+        position = np.asarray(position, dtype=float)
+        z_axis = np.asarray(target, dtype=float) - position
+        if np.linalg.norm(z_axis) == 0.0:
+            raise ValueError("look_at: must differ from the camera position")
+        z_axis = z_axis / np.linalg.norm(z_axis)
+        x_axis = np.cross(z_axis, np.asarray(up, dtype=float))   # right = forward x up
+        if np.linalg.norm(x_axis) < 1e-9:
+            raise ValueError("up: must not be parallel to the viewing direction")
+        x_axis = x_axis / np.linalg.norm(x_axis)
+        y_axis = np.cross(z_axis, x_axis)                        # down
+        return cls(np.array([x_axis, y_axis, z_axis]), position, fx, fy, cx, cy, width, height,
+                   tuple(pixel_origin), tuple(pixel_axes))
+
+    @classmethod
+    def from_rpy(cls, position, rpy, fx, fy, cx, cy, width, height,
+                 pixel_origin=(0.0, 0.0), pixel_axes=(1.0, 1.0)):
+        """Camera whose frame (X right, Y down, Z forward) has URDF roll-pitch-yaw ``rpy``."""
+        return cls(_rpy_matrix(rpy).T, np.asarray(position, dtype=float), fx, fy, cx, cy,
+                   width, height, tuple(pixel_origin), tuple(pixel_axes))
+
+    @classmethod
+    def paper(cls, focal_length=0.15, scale=900.0, distance=5.0, width=640, height=480):
+        """The paper's camera: X_C || Y_0, Y_C || Z_0, Z_C || X_0, centre at (-d_C, 0, 0).
+
+        Pixels from the optical axis with u along Y_0 and v along Z_0, f beta = 135 px.
+        """
+        fb = focal_length * scale
+        return cls.look_at((-distance, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), fb, fb,
+                           width / 2.0, height / 2.0, width, height,
+                           (width / 2.0, height / 2.0), (-1.0, -1.0))
+
+    @classmethod
+    def from_params(cls, values, prefix="camera.", section="sim_node"):
+        """The camera of a parameter set (keys ``prefix + CAMERA_KEYS``); ValueError naming one."""
+        def get(key):
+            return values[prefix + key]
+
+        def where(key):
+            return f"{section}.{prefix}{key}"
+
+        for key, size in (("position", 3), ("up", 3), ("pixel_scale", 2),
+                          ("principal_point", 2), ("image_size", 2), ("pixel_origin", 2),
+                          ("pixel_axes", 2)):
+            if len(get(key)) != size:
+                raise ValueError(f"{where(key)}: needs {size} values, got {len(get(key))}")
+        if get("focal_length") <= 0.0:
+            raise ValueError(f"{where('focal_length')}: must be > 0, got {get('focal_length')}")
+        if min(get("pixel_scale")) <= 0.0:
+            raise ValueError(f"{where('pixel_scale')}: must be > 0, got "
+                             f"{list(get('pixel_scale'))}")
+        width, height = (float(v) for v in get("image_size"))
+        if width < 1 or height < 1 or width != int(width) or height != int(height):
+            raise ValueError(f"{where('image_size')}: two whole numbers >= 1, got "
+                             f"{list(get('image_size'))}")
+        if any(abs(a) != 1.0 for a in get("pixel_axes")):
+            raise ValueError(f"{where('pixel_axes')}: each must be 1 or -1, got "
+                             f"{list(get('pixel_axes'))}")
+        fx, fy = (get("focal_length") * s for s in get("pixel_scale"))
+        cx, cy = get("principal_point")
+        common = (fx, fy, cx, cy, int(width), int(height), tuple(get("pixel_origin")),
+                  tuple(get("pixel_axes")))
+        if len(get("look_at")) not in (0, 3):
+            raise ValueError(f"{where('look_at')}: needs 3 values (or none, then "
+                             f"{prefix}rpy is used), got {len(get('look_at'))}")
+        if len(get("look_at")) == 0 and len(get("rpy")) != 3:
+            raise ValueError(f"{where('rpy')}: needs 3 values when {prefix}look_at is "
+                             f"empty, got {len(get('rpy'))}")
+        try:
+            if len(get("look_at")) == 3:
+                return cls.look_at(get("position"), get("look_at"), get("up"), *common)
+            return cls.from_rpy(get("position"), get("rpy"), *common)
+        except ValueError as exc:
+            raise ValueError(f"{section}.{prefix}{exc}") from None
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """One camera measurement: capture time, pixels (2m,) and true depths (m,)."""
+
+    stamp: float
+    pixels: np.ndarray
+    depth: np.ndarray
+    visible: bool
+
+
+class FeatureCamera:
+    """Produces the feature pixels seen by the controller: noise and frame delay.
+
+    A frame captured at step k is delivered ``delay_frames`` frames later, with
+    its own capture stamp.  Points behind the camera are marked not visible.
+    """
+
+    def __init__(self, camera, pixel_noise_std=0.0, delay_frames=0, seed=0):
+        self.camera = camera
+        self.noise = float(pixel_noise_std)
+        self.rng = np.random.default_rng(seed)
+        self.buffer = deque(maxlen=int(delay_frames) + 1)
+
+    def capture(self, stamp, pixels, depth):
+        """Capture a frame of the exact projection ``camera.project(points)`` now.
+
+        Returns the frame due for delivery now (noise added, delay applied).
+        """
+        visible = min(depth.tolist()) > 0.0
+        if self.noise > 0.0:
+            pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
+        self.buffer.append(CameraFrame(stamp, pixels, depth, visible))
+        return self.buffer[0]

@@ -1,0 +1,378 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Property 1 for any serial chain: kinematic regressors that need no length and no camera.
+
+Write feature point i as a sum over the chain's unknown lengths theta_k (joint
+origin translation components and tip-frame offset components)::
+
+    r_i(q) = w0_i(q) + sum_k theta_k v_k(q),      v_k(q) = R_f(k)(q) d_k
+
+where ``R_f`` is the rotation of a chain frame (it depends on q and on known
+structure only: joint axes and origin rotations), ``d_k`` a constant unit
+direction in that frame, and ``w0_i`` gathers what is known (lengths declared
+known, and q_k times the axis of each prismatic joint).  The camera's
+projection matrix P = [[D_bar, d_bar0], [d3^T, d0]] (pixels of the controller,
+depth in metres) then gives
+
+    z_i     = d3^T r_i + d0     : linear in the products d3_l theta_k, d3_l, d0   -> a_z
+    J_z_perp = D_bar dr/dq      : linear in the products D_bar_ab theta_k, D_bar_ab -> a_z_perp
+
+The image offset d_bar0 never appears in J (eq (a1)).  Many of these products
+are not independent as functions of q: a length in the base frame gives a
+constant depth term (it folds into d0) and no Jacobian term; two lengths along
+the same direction of the same frame act as one.  The full set of columns is
+therefore reduced to an independent basis once, numerically: the column
+functions are sampled at random configurations, a QR with column pivoting
+picks independent columns B, and least squares gives E with
+``full_columns(q) = full_columns(q)[:, B] @ E`` for every sample (checked to
+1e-9).  The controller adapts ``a = E a_full``; only the B columns are
+evaluated at run time.
+
+Derivatives are exact and closed-form: with omega_l the world axis of revolute
+joint l, ``dv/dq_l = omega_l x v`` for the joints before the vector's frame,
+and along a motion ``d/dt (omega_l x v) = omega_l_dot x v + omega_l x v_dot``
+with ``v_dot = Omega_f x v`` (Omega_f the angular velocity of frame f) and
+``omega_l_dot = Omega_l x omega_l``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .urdf_chain import skew
+
+AXES = "xyz"
+_SAMPLES = 64
+_RANK_TOL = 1e-10
+_RESIDUAL_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Length:
+    """One length of the chain: ``theta v(q)`` with ``v = R_frame(q) direction``."""
+
+    name: str
+    frame: int
+    direction: np.ndarray
+    points: tuple
+    value: float
+    unknown: bool
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """An independent basis of column functions: full columns = basis columns @ E."""
+
+    basis: np.ndarray       # (p,) indices into the full columns
+    E: np.ndarray           # (p, p_full)
+    labels: tuple
+    full_labels: tuple
+
+
+def _cross(a, b):
+    """Cross product over the last axis (np.cross costs ~10 us on these small arrays)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+class KinematicRegressor:
+    """The tensors H, dH, W and their rates (see :class:`~.base.RobotCameraModel`) of a chain.
+
+    Parameters
+    ----------
+    chain : urdf_chain.KinematicChain
+    offsets : (m, 3)
+        Nominal feature offsets c_i in the tip frame [m] (m = 1, 2 or 3).
+    unknown : "all" or sequence of str
+        Names of the unknown lengths (see :attr:`length_names`); the others are
+        taken as known, at their nominal values.
+    """
+
+    def __init__(self, chain, offsets, unknown="all"):
+        self.chain = chain
+        self.offsets = np.array(offsets, dtype=float).reshape(-1, 3)
+        self.n, self.m = chain.n, len(self.offsets)
+        self.lengths = self._lengths(unknown)
+        self._structure()
+        self._columns()
+        self.z_reduction = self._reduce(self._z_samples, self.z_full_labels)
+        self.perp_reduction = self._reduce(self._perp_samples, self.perp_full_labels)
+        self._gather()
+
+    # -- structure -----------------------------------------------------------------
+    def _lengths(self, unknown):
+        chain, lengths = self.chain, []
+        everything = []
+        for k, joint in enumerate(chain.joints):
+            for j in range(3):
+                if joint.origin_translation[j] != 0.0:
+                    everything.append((f"{joint.name}.{AXES[j]}", k, np.eye(3)[j],
+                                       tuple(range(self.m)), joint.origin_translation[j]))
+        tip_name = chain.tip_joints[-1] if chain.tip_joints else chain.tip_link
+        for j in range(3):
+            if chain.tip_translation[j] != 0.0:
+                everything.append((f"{tip_name}.{AXES[j]}", chain.n, np.eye(3)[j],
+                                   tuple(range(self.m)), chain.tip_translation[j]))
+        for i, c in enumerate(self.offsets):
+            for j in range(3):
+                everything.append((f"point{i + 1}.{AXES[j]}", chain.n,
+                                   chain.tip_rotation[:, j], (i,), c[j]))
+        names = [e[0] for e in everything]
+        if isinstance(unknown, str):
+            if unknown != "all":
+                raise ValueError(f"unknown_lengths: 'all' or a list of names, got {unknown!r}")
+            chosen = set(names)
+        else:
+            chosen = set(unknown)
+            missing = sorted(chosen - set(names))
+            if missing:
+                raise ValueError(f"unknown_lengths: no length(s) {missing} in this chain; "
+                                 f"known names: {names}")
+        for name, frame, direction, points, value in everything:
+            lengths.append(Length(name, frame, direction, points, float(value), name in chosen))
+        return tuple(lengths)
+
+    @property
+    def length_names(self):
+        return tuple(L.name for L in self.lengths)
+
+    def _structure(self):
+        """Directions table, prismatic terms and the constant arrays of the frame recursion."""
+        chain, n = self.chain, self.n
+        keys = []
+
+        def key_index(frame, direction):
+            for s, (f, d) in enumerate(keys):
+                if f == frame and np.allclose(d, direction, atol=1e-12):
+                    return s
+            keys.append((frame, np.asarray(direction, dtype=float)))
+            return len(keys) - 1
+
+        self._length_dir = [key_index(L.frame, L.direction) for L in self.lengths]
+        self._prismatic = [(k, key_index(k, j.origin_rotation @ j.axis))
+                           for k, j in enumerate(chain.joints) if j.prismatic]
+        self.S = len(keys)
+        self._frame = np.array([f for f, _ in keys], dtype=int)
+        self._dirs = np.array([d for _, d in keys])
+        # M_k(q_k) = R_o Rot(axis, q_k) = A + sin q_k B + (1 - cos q_k) C  (B = C = 0: prismatic)
+        self._A = np.array([j.origin_rotation for j in chain.joints])
+        K = np.array([np.zeros((3, 3)) if j.prismatic else skew(j.axis) for j in chain.joints])
+        self._B = self._A @ K
+        self._C = self._A @ K @ K
+        self._axes = np.array([j.origin_rotation @ j.axis for j in chain.joints])
+        self._revolute = np.array([not j.prismatic for j in chain.joints], dtype=float)
+        # dv_s/dq_l = omega_l x v_s for revolute joints l before frame f_s
+        self._moves = ((np.arange(n)[None, :] < self._frame[:, None])
+                       * self._revolute[None, :])[:, :, None]
+        # known part w0_i: constant coefficients of the known lengths, per point
+        self._known = np.zeros((self.m, self.S))
+        for L, s in zip(self.lengths, self._length_dir):
+            if not L.unknown:
+                self._known[list(L.points), s] += L.value
+        self.has_w0 = bool(self._prismatic) or bool(np.any(self._known))
+
+    # -- evaluation ------------------------------------------------------------------
+    def _evaluate(self, q, qd):
+        """Value, joint gradient and its rate of every column vector, per point.
+
+        Returns T (m, S+2, 3), dT and dT_rate (m, n, S+2, 3): rows 0..S-1 the
+        directions v_s, row S the known part w0_i, row S+1 the constant 1.
+        """
+        n, m, S = self.n, self.m, self.S
+        sin_q, cos_q = np.sin(q), np.cos(q)
+        M = self._A + sin_q[:, None, None] * self._B + (1.0 - cos_q)[:, None, None] * self._C
+        R = np.empty((n + 1, 3, 3))
+        R[0] = np.eye(3)
+        for k in range(n):
+            R[k + 1] = R[k].dot(M[k])
+        axes = np.einsum("kij,kj->ki", R[:n], self._axes)         # omega_l (or prismatic u_l)
+        Omega = np.zeros((n + 1, 3))
+        Omega[1:] = np.cumsum((qd * self._revolute)[:, None] * axes, axis=0)
+        V = np.einsum("sij,sj->si", R[self._frame], self._dirs)   # (S, 3)
+        V_dot = _cross(Omega[self._frame], V)
+        axes_dot = _cross(Omega[:n], axes)
+        dV = _cross(axes[None, :, :], V[:, None, :]) * self._moves            # (S, n, 3)
+        dV_rate = (_cross(axes_dot[None, :, :], V[:, None, :])
+                   + _cross(axes[None, :, :], V_dot[:, None, :])) * self._moves
+
+        T = np.zeros((m, S + 2, 3))
+        dT = np.zeros((m, n, S + 2, 3))
+        dT_rate = np.zeros((m, n, S + 2, 3))
+        T[:, :S] = V
+        T[:, S + 1] = 1.0
+        dT[:, :, :S] = dV.transpose(1, 0, 2)
+        dT_rate[:, :, :S] = dV_rate.transpose(1, 0, 2)
+        if self.has_w0:
+            coef = self._known.copy()
+            coef_rate = np.zeros_like(coef)
+            for k, s in self._prismatic:
+                coef[:, s] += q[k]
+                coef_rate[:, s] += qd[k]
+            T[:, S] = coef @ V
+            dT[:, :, S] = np.einsum("is,slc->ilc", coef, dV)
+            dT_rate[:, :, S] = (np.einsum("is,slc->ilc", coef, dV_rate)
+                                + np.einsum("is,slc->ilc", coef_rate, dV))
+            for k, s in self._prismatic:
+                dT[:, k, S] += V[s]
+                dT_rate[:, k, S] += V_dot[s]
+        return T, dT, dT_rate
+
+    # -- the full columns and their reduction --------------------------------------------
+    def _columns(self):
+        S, m = self.S, self.m
+        z_cols, perp_cols = [], []   # (table row, coordinate, point mask, label) (+ image row)
+        for L, s in zip(self.lengths, self._length_dir):
+            if not L.unknown:
+                continue
+            mask = np.isin(np.arange(m), L.points).astype(float)
+            for c in range(3):
+                z_cols.append((s, c, mask, f"d3{AXES[c]}*{L.name}", ("len", L, c)))
+            for a in range(2):
+                for b in range(3):
+                    perp_cols.append((s, a, b, mask, f"D{a + 1}{AXES[b]}*{L.name}",
+                                      ("len", L, a, b)))
+        if self.has_w0:
+            ones = np.ones(m)
+            for c in range(3):
+                z_cols.append((S, c, ones, f"d3{AXES[c]}*known", ("w0", c)))
+            for a in range(2):
+                for b in range(3):
+                    perp_cols.append((S, a, b, ones, f"D{a + 1}{AXES[b]}*known", ("w0", a, b)))
+        z_cols.append((S + 1, 0, np.ones(m), "d0", ("d0",)))
+        self._z_cols, self._perp_cols = z_cols, perp_cols
+        self.z_full_labels = tuple(c[3] for c in z_cols)
+        self.perp_full_labels = tuple(c[4] for c in perp_cols)
+
+    def _z_full(self, T, dT):
+        rows = np.array([c[0] for c in self._z_cols])
+        coords = np.array([c[1] for c in self._z_cols])
+        mask = np.array([c[2] for c in self._z_cols]).T
+        return T[:, rows, coords] * mask
+
+    def _perp_full(self, dT):
+        rows = np.array([c[0] for c in self._perp_cols])
+        comps = np.array([c[2] for c in self._perp_cols])
+        image_row = np.array([c[1] for c in self._perp_cols])
+        mask = np.array([c[3] for c in self._perp_cols]).T
+        G = dT[:, :, rows, comps] * mask[:, None, :]
+        select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)
+        return (G[:, None] * select[None, :, None, :]).reshape(2 * self.m, self.n, -1)
+
+    def _sample_configurations(self):
+        rng = np.random.default_rng(0)
+        lo = np.where(self._revolute > 0, -np.pi, -1.0)
+        return rng.uniform(lo, -lo, size=(_SAMPLES, self.n))
+
+    @property
+    def _z_samples(self):
+        rows = []
+        for q in self._sample_configurations():
+            T, dT, _ = self._evaluate(q, np.zeros(self.n))
+            rows.append(self._z_full(T, dT))
+        return np.vstack(rows)
+
+    @property
+    def _perp_samples(self):
+        rows = []
+        for q in self._sample_configurations():
+            _, dT, _ = self._evaluate(q, np.zeros(self.n))
+            rows.append(self._perp_full(dT).reshape(-1, len(self._perp_cols)))
+        return np.vstack(rows)
+
+    @staticmethod
+    def _reduce(samples, labels):
+        from scipy.linalg import qr
+
+        if samples.shape[1] == 0:
+            return Reduction(np.zeros(0, dtype=int), np.zeros((0, 0)), (), tuple(labels))
+        scale = np.max(np.abs(samples))
+        if scale == 0.0:
+            return Reduction(np.zeros(0, dtype=int), np.zeros((0, samples.shape[1])), (),
+                             tuple(labels))
+        _, r, pivots = qr(samples / scale, mode="economic", pivoting=True)
+        diag = np.abs(np.diag(r))
+        rank = int(np.count_nonzero(diag > _RANK_TOL * max(samples.shape) * diag[0]))
+        basis = np.sort(pivots[:rank])
+        E, *_ = np.linalg.lstsq(samples[:, basis], samples, rcond=None)
+        residual = np.max(np.abs(samples[:, basis] @ E - samples))
+        if residual > _RESIDUAL_TOL * scale:
+            raise ArithmeticError(f"kinematic regressor reduction: residual {residual:.3g} "
+                                  f"(scale {scale:.3g}); the column functions could not be "
+                                  f"reduced to an exact basis")
+        E[np.abs(E) < 1e-12] = 0.0
+        names = []
+        for row, b in zip(E, basis):
+            others = int(np.count_nonzero(row)) - 1
+            names.append(labels[b] + (f"+{others} more" if others > 0 else ""))
+        return Reduction(basis, E, tuple(names), tuple(labels))
+
+    def _gather(self):
+        zb, pb = self.z_reduction.basis, self.perp_reduction.basis
+        self._z_rows = np.array([self._z_cols[b][0] for b in zb], dtype=int)
+        self._z_coords = np.array([self._z_cols[b][1] for b in zb], dtype=int)
+        self._z_mask = np.array([self._z_cols[b][2] for b in zb]).reshape(-1, self.m).T
+        self._p_rows = np.array([self._perp_cols[b][0] for b in pb], dtype=int)
+        self._p_comps = np.array([self._perp_cols[b][2] for b in pb], dtype=int)
+        self._p_mask = np.array([self._perp_cols[b][3] for b in pb]).reshape(-1, self.m).T
+        image_row = np.array([self._perp_cols[b][1] for b in pb], dtype=int)
+        self._p_select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)
+        self.p_z, self.p_perp = len(zb), len(pb)
+
+    # -- public ----------------------------------------------------------------------
+    def tensors(self, q, qd):
+        """``(H, dH, dH_rate, W, W_rate)`` at (q, q_dot): shapes as in RobotCameraModel."""
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        T, dT, dT_rate = self._evaluate(q, qd)
+        rows, coords, mask = self._z_rows, self._z_coords, self._z_mask
+        H = T[:, rows, coords] * mask
+        dH = dT[:, :, rows, coords] * mask[:, None, :]
+        dH_rate = dT_rate[:, :, rows, coords] * mask[:, None, :]
+        m2, n = 2 * self.m, self.n
+        pmask = self._p_mask[:, None, None, :]
+        select = self._p_select[None, :, None, :]
+        G = dT[:, :, self._p_rows, self._p_comps][:, None] * pmask
+        G_rate = dT_rate[:, :, self._p_rows, self._p_comps][:, None] * pmask
+        W = (G * select).reshape(m2, n, -1)
+        W_rate = (G_rate * select).reshape(m2, n, -1)
+        return H, dH, dH_rate, W, W_rate
+
+    def parameters(self, camera_matrix, lengths=None):
+        """(a_z_perp, a_z) of this chain seen through ``camera_matrix``.
+
+        Parameters
+        ----------
+        camera_matrix : (3, 4)
+            P = [[D_bar, d_bar0], [d3^T, d0]] in the base frame of the chain, mapping
+            homogeneous points to (pixels * depth, depth) in the controller's pixels.
+        lengths : dict, optional
+            Values of the unknown lengths by name; default: their nominal values.
+        """
+        P = np.asarray(camera_matrix, dtype=float)
+        D_bar, d3, d0 = P[:2, :3], P[2, :3], P[2, 3]
+        values = {L.name: L.value for L in self.lengths}
+        if lengths:
+            unknown = set(lengths) - set(values)
+            if unknown:
+                raise ValueError(f"lengths: no length(s) {sorted(unknown)} in this chain")
+            values.update(lengths)
+        z_full = np.array([d3[c[4][2]] * values[c[4][1].name] if c[4][0] == "len"
+                           else d3[c[4][1]] if c[4][0] == "w0" else d0 for c in self._z_cols])
+        perp_full = np.array([D_bar[c[5][2], c[5][3]] * values[c[5][1].name] if c[5][0] == "len"
+                              else D_bar[c[5][1], c[5][2]] for c in self._perp_cols])
+        return self.perp_reduction.E @ perp_full, self.z_reduction.E @ z_full
