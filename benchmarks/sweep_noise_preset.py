@@ -39,8 +39,8 @@ CONFIG = os.path.join(ROOT, "config", "paper_3dof.yaml")
 CONDITIONS = {
     "0.5 px": ["sim_node.pixel_noise_std=0.5"],
     "1 px": ["sim_node.pixel_noise_std=1.0"],
-    "delay 2": ["sim_node.camera_delay_frames=2"],
-    "1 px + delay 2": ["sim_node.pixel_noise_std=1.0", "sim_node.camera_delay_frames=2"],
+    "delay 2": ["sim_node.camera_latency=0.01"],
+    "1 px + delay 2": ["sim_node.pixel_noise_std=1.0", "sim_node.camera_latency=0.01"],
 }
 GAMMA_D = (300.0, 100.0, 30.0, 10.0)
 ALPHA_GAMMA = ((10.0, 10.0), (5.0, 5.0), (3.0, 3.0), (6.0, 3.0))

@@ -231,25 +231,37 @@ class CameraFrame:
 
 
 class FeatureCamera:
-    """Produces the feature pixels seen by the controller: noise and frame delay.
+    """The camera as the controller sees it: frames at its own rate, noisy and late.
 
-    A frame captured at step k is delivered ``delay_frames`` frames later, with
-    its own capture stamp.  Points behind the camera are marked not visible.
+    A frame is captured at the first control instant at or after each nominal
+    frame time k / ``rate`` (so capture times jitter by up to one control period
+    when the rates do not divide), gets Gaussian pixel noise, and is published at
+    the first control instant at or after its capture time plus ``latency``,
+    stamped with its capture time.  Points behind the camera are marked not
+    visible.  ``rate`` 0 means a frame at every control instant.
     """
 
-    def __init__(self, camera, pixel_noise_std=0.0, delay_frames=0, seed=0):
+    def __init__(self, camera, pixel_noise_std=0.0, rate=0.0, latency=0.0, seed=0):
         self.camera = camera
         self.noise = float(pixel_noise_std)
+        self.period = 1.0 / rate if rate > 0.0 else 0.0
+        self.latency = float(latency)
         self.rng = np.random.default_rng(seed)
-        self.buffer = deque(maxlen=int(delay_frames) + 1)
+        self.pending = deque()
+        self.captured = 0
+        self.published = 0
 
-    def capture(self, stamp, pixels, depth):
-        """Capture a frame of the exact projection ``camera.project(points)`` now.
+    def step(self, t, pixels, depth):
+        """Capture a frame at ``t`` if one is due, return the frame published at ``t`` (or None).
 
-        Returns the frame due for delivery now (noise added, delay applied).
+        ``pixels`` (2m,) and ``depth`` (m,) are the exact projection at t.
         """
-        visible = min(depth.tolist()) > 0.0
-        if self.noise > 0.0:
-            pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
-        self.buffer.append(CameraFrame(stamp, pixels, depth, visible))
-        return self.buffer[0]
+        if t >= self.captured * self.period - 1e-9:
+            if self.noise > 0.0:
+                pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
+            self.pending.append(CameraFrame(t, pixels, depth, min(depth.tolist()) > 0.0))
+            self.captured += 1
+        if self.pending and self.pending[0].stamp + self.latency <= t + 1e-9:
+            self.published += 1
+            return self.pending.popleft()
+        return None

@@ -15,8 +15,9 @@
 """The simulated robot + camera as one object: what ``sim_node`` and ``vas run`` drive.
 
 Each control period: :meth:`Simulator.measure` returns the joint state and the
-camera frame due now (noise and delay applied), then :meth:`Simulator.apply`
-holds a torque over the physics sub-steps.  Commands are validated here too:
+camera frame published now, if any (camera rate, noise and latency applied,
+stamped with its capture time), then :meth:`Simulator.apply` holds a torque
+over the physics sub-steps.  Commands are validated here too:
 a command of the wrong length or with NaN/inf is refused and zero torque is
 applied instead, with the reason returned to the caller.
 """
@@ -42,8 +43,8 @@ class Measurement:
     q: np.ndarray
     qd: np.ndarray
     tau_applied: np.ndarray
-    feature_stamp: float | None      # capture time of the frame delivered now
-    pixels: np.ndarray | None        # (2m,) px, None when no frame is due yet
+    feature_stamp: float | None      # capture time of the frame published now
+    pixels: np.ndarray | None        # (2m,) px, None when no frame is published now
     true_depth: np.ndarray           # (m,) depth at time t (ground truth, plots only)
     true_pixels: np.ndarray          # (2m,) noiseless pixels at time t
     problems: tuple = ()
@@ -65,28 +66,27 @@ class Simulator:
                               arm.chain.joint_names, arm.offsets)
         self.camera = config.camera
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
-                                            config.camera_delay_frames, config.seed)
+                                            config.camera_rate, config.camera_latency, config.seed)
         self.plant.reset(config.initial_positions, config.initial_velocities)
         self.tau = np.zeros(self.n)
         self.step_index = 0
         # read once: SimConfig attribute access goes through __getattr__ (every period)
         self._period = config.control_period
         self._substeps = config.substeps
-        self._delay_frames = config.camera_delay_frames
 
     @property
     def t(self):
         return self.step_index * self._period
 
     def measure(self):
-        """Sensors now; a frame is delivered once the camera delay has passed."""
+        """Sensors now: the joint state, and the camera frame published now (if any)."""
         q, qd = self.plant.joint_state()
         t = self.t
         true_pixels, true_depth = self.camera.project(self.plant.feature_positions())
-        frame = self.feature_camera.capture(t, true_pixels, true_depth)
+        frame = self.feature_camera.step(t, true_pixels, true_depth)
         problems = []
         pixels, stamp = None, None
-        if self.step_index >= self._delay_frames:
+        if frame is not None:
             if frame.visible:
                 pixels, stamp = frame.pixels, frame.stamp
             else:

@@ -193,30 +193,58 @@ def test_singular_j_star_is_damped_not_a_crash(scenario):
 
 
 # -- bad input ----------------------------------------------------------------------------------
-BAD_SAMPLES = [
+BAD_JOINTS = [
     ("q", np.array([np.nan, 0.5, -0.5]), "joint positions q: contains NaN"),
     ("q", np.array([1.0, 0.5]), "joint positions q: expected 3 values"),
     ("qd", np.array([0.0, np.inf, 0.0]), "joint velocities qd: contains NaN or inf"),
-    ("x", np.array([np.nan, 65.0]), "feature x: contains NaN"),
-    ("x", np.array([65.0, 65.0, 1.0]), "feature x: expected 2 values"),
-    ("x", np.array([900.0, 65.0]), "outside the image bounds"),
-    ("x", None, "feature x: missing"),
+]
+BAD_FRAMES = [
+    (np.array([np.nan, 65.0]), "feature x: contains NaN"),
+    (np.array([65.0, 65.0, 1.0]), "feature x: expected 2 values"),
+    (np.array([900.0, 65.0]), "outside the image bounds"),
 ]
 
 
-@pytest.mark.parametrize("which, value, message", BAD_SAMPLES)
-def test_bad_sample_is_rejected_without_touching_the_state(which, value, message):
-    ctl = controller()
+@pytest.mark.parametrize("compensation", [True, False])
+@pytest.mark.parametrize("which, value, message", BAD_JOINTS)
+def test_bad_joint_sample_is_rejected_without_touching_the_state(which, value, message,
+                                                                 compensation):
+    ctl = controller(latency_compensation=compensation)
     good = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
     state_before, rates_before = ctl.state, ctl.rates
-    args = {"q": Q0, "qd": np.zeros(3), "x": measure(ctl)}
+    args = {"q": Q0, "qd": np.zeros(3)}
     args[which] = value
-    res = ctl.step(T, args["q"], args["qd"], args["x"])
+    res = ctl.step(T, args["q"], args["qd"], measure(ctl))
     assert res.status == "hold"
     assert any(message in p for p in res.problems), res.problems
     np.testing.assert_array_equal(res.tau, good.tau)
     assert ctl.state is state_before and ctl.rates is rates_before
     assert health(res)[0] == "WARN"
+
+
+@pytest.mark.parametrize("value, message", BAD_FRAMES + [(None, "feature x: missing")])
+def test_without_compensation_a_bad_frame_rejects_the_sample(value, message):
+    ctl = controller(latency_compensation=False)
+    good = ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    state_before, rates_before = ctl.state, ctl.rates
+    res = ctl.step(T, Q0, np.zeros(3), value)
+    assert res.status == "hold"
+    assert any(message in p for p in res.problems), res.problems
+    np.testing.assert_array_equal(res.tau, good.tau)
+    assert ctl.state is state_before and ctl.rates is rates_before
+
+
+@pytest.mark.parametrize("value, message", BAD_FRAMES)
+def test_with_compensation_a_bad_frame_is_refused_and_the_sample_runs_on_the_prediction(
+        value, message):
+    ctl = controller()
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    predicted = ctl.predictor.predict(T)
+    res = ctl.step(T, Q0, np.zeros(3), value)
+    assert res.status == "ok" and any(message in p for p in res.problems), res.problems
+    assert ctl.frames["rejected"] == 1 and ctl.frames["applied"] == 1
+    np.testing.assert_array_equal(ctl.predictor.x_hat, predicted)
+    np.testing.assert_allclose(res.error, predicted - res.x_d)
 
 
 def test_degenerate_estimates_without_guards_reject_the_sample_not_crash():
@@ -239,7 +267,7 @@ def test_time_going_backwards_is_rejected():
 
 def test_hold_then_gravity_compensation_then_recovery_with_a_new_blend():
     ctl = controller(**{"safety.hold_time": 0.02, "safety.camera_timeout": 0.05,
-                        "safety.fallback_damping": 2.0})
+                        "safety.fallback_damping": 2.0, "latency_compensation": False})
     t = 0.0
     ok = ctl.step(t, Q0, np.zeros(3), measure(ctl))
     statuses = []
@@ -255,6 +283,22 @@ def test_hold_then_gravity_compensation_then_recovery_with_a_new_blend():
     np.testing.assert_allclose(fallback.tau, g_hat - 2.0 * qd)
     assert ctl.stale
     # the camera comes back somewhere else: restart at the measurement, no jump in x_d
+    q_new = Q0 + np.array([0.02, 0.01, -0.01])
+    back = ctl.step(20 * T, q_new, np.zeros(3), measure(ctl, q_new))
+    assert back.status == "ok" and not ctl.stale
+    np.testing.assert_allclose(back.error, 0.0, atol=1e-12)
+
+
+def test_with_compensation_a_stopped_camera_is_predicted_then_held_then_gravity_compensated():
+    ctl = controller(**{"safety.hold_time": 0.02, "safety.camera_timeout": 0.05,
+                        "safety.fallback_damping": 2.0})
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    qd = np.array([0.1, -0.2, 0.05])
+    statuses = [ctl.step(k * T, Q0, qd, None).status for k in range(1, 20)]
+    # predicted up to camera_timeout (10 samples), then held for hold_time, then the fallback
+    assert statuses[:9] == ["ok"] * 9
+    assert statuses[9:12] == ["hold"] * 3 and statuses[-1] == "fallback"
+    assert ctl.stale
     q_new = Q0 + np.array([0.02, 0.01, -0.01])
     back = ctl.step(20 * T, q_new, np.zeros(3), measure(ctl, q_new))
     assert back.status == "ok" and not ctl.stale

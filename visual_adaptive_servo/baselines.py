@@ -109,6 +109,9 @@ def velocity_law(model, gains, state, q, qd, x, x_dot, xd, xd_dot, xd_ddot, proj
 class VelocityAdaptiveTracker(AdaptiveVisualTracker):
     """Velocity-based adaptive tracker with numerically differentiated pixels.
 
+    It takes each camera frame as current when it arrives (no latency compensation:
+    it has no observer to predict with) and holds its command between frames.
+
     Parameters
     ----------
     config : ControllerConfig
@@ -121,6 +124,8 @@ class VelocityAdaptiveTracker(AdaptiveVisualTracker):
         Weight k_e of the image-velocity prediction error in the kinematic
         adaptation; 0 = Lyapunov terms only.
     """
+
+    compensates_latency = False
 
     def __init__(self, config, filter_time=0.0, prediction_gain=0.0):
         if not filter_time >= 0.0:
@@ -147,8 +152,8 @@ class VelocityAdaptiveTracker(AdaptiveVisualTracker):
             return raw
         return v_prev + (dt / (self.filter_time + dt)) * (raw - v_prev)
 
-    def step(self, t, q, qd, x):
-        result = super().step(t, q, qd, x)
+    def step(self, t, q, qd, x=None, x_stamp=None):
+        result = super().step(t, q, qd, x, x_stamp)
         if result.status == "ok":
             self._last_pixels = self._pending
         return result
@@ -207,6 +212,8 @@ class CalibratedIBVS(AdaptiveVisualTracker):
     null_space_damping : float
         k_n [1/s] on the self-motion of a redundant arm.
     """
+
+    compensates_latency = False
 
     def __init__(self, config, natural_frequency=20.0, damping_ratio=1.0,
                  null_space_damping=10.0):

@@ -16,7 +16,9 @@
 
 ``vas run`` runs the closed loop (PyBullet arm + camera + controller) in one
 process, without ROS, and writes summary.json, timeseries.csv, PNG plots and a
-rosbag2 MCAP file.
+rosbag2 MCAP file.  ``vas teach`` records a realisable desired trajectory,
+``vas robustness`` and ``vas compare`` run the robustness matrix and the
+comparison with the baselines.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import sys
 
 from .compare import add_parser as add_compare_parser
 from .config import ConfigError, load_scenario
+from .teach import add_parser as add_teach_parser
 
 
 def _floats(text):
@@ -46,8 +49,10 @@ def _run_overrides(args):
         overrides.append(f"sim_node.pixel_noise_std={args.pixel_noise}")
     if args.seed is not None:
         overrides.append(f"sim_node.seed={args.seed}")
-    if args.delay_frames is not None:
-        overrides.append(f"sim_node.camera_delay_frames={args.delay_frames}")
+    if args.camera_rate is not None:
+        overrides.append(f"sim_node.camera_rate={args.camera_rate}")
+    if args.camera_latency is not None:
+        overrides.append(f"sim_node.camera_latency={args.camera_latency}")
     return overrides
 
 
@@ -109,7 +114,10 @@ def build_parser():
     run.add_argument("--initial-positions", type=_floats, metavar="A,B,C",
                      help="joint positions at start [rad]")
     run.add_argument("--pixel-noise", type=float, metavar="STD", help="pixel noise std [px]")
-    run.add_argument("--delay-frames", type=int, metavar="N", help="camera delay [frames]")
+    run.add_argument("--camera-rate", type=float, metavar="HZ",
+                     help="camera frames per second (0: one per control period)")
+    run.add_argument("--camera-latency", type=float, metavar="S",
+                     help="camera latency from capture to publication [s]")
     run.add_argument("--seed", type=int, help="noise seed")
     run.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE",
                      help="override a parameter, e.g. controller_node.alpha=12 (repeatable)")
@@ -122,6 +130,7 @@ def build_parser():
     rob.add_argument("--duration", type=float, default=10.0, help="simulated seconds per case")
     rob.set_defaults(func=cmd_robustness)
     add_compare_parser(sub)
+    add_teach_parser(sub, _floats)
     return parser
 
 

@@ -74,7 +74,7 @@ class Scenario:
 
 def scenarios(model):
     """The compared conditions; wrong estimates are relative to the model's true values."""
-    clean = ("sim_node.pixel_noise_std=0.0", "sim_node.camera_delay_frames=0")
+    clean = ("sim_node.pixel_noise_std=0.0", "sim_node.camera_latency=0.0")
 
     def estimates(factor):
         a_perp = [float(v) * factor for v in model.a_z_perp]
@@ -85,15 +85,15 @@ def scenarios(model):
     return (
         Scenario("clean", "clean", clean),
         Scenario("noise_0.25", "pixel noise 0.25 px", ("sim_node.pixel_noise_std=0.25",
-                                                       "sim_node.camera_delay_frames=0")),
+                                                       "sim_node.camera_latency=0.0")),
         Scenario("noise_0.5", "pixel noise 0.5 px", ("sim_node.pixel_noise_std=0.5",
-                                                     "sim_node.camera_delay_frames=0")),
+                                                     "sim_node.camera_latency=0.0")),
         Scenario("noise_1", "pixel noise 1 px", ("sim_node.pixel_noise_std=1.0",
-                                                 "sim_node.camera_delay_frames=0")),
+                                                 "sim_node.camera_latency=0.0")),
         Scenario("delay_1", "camera delay 1 frame", ("sim_node.pixel_noise_std=0.0",
-                                                     "sim_node.camera_delay_frames=1")),
+                                                     "sim_node.camera_latency=0.005")),
         Scenario("delay_2", "camera delay 2 frames", ("sim_node.pixel_noise_std=0.0",
-                                                      "sim_node.camera_delay_frames=2")),
+                                                      "sim_node.camera_latency=0.01")),
         Scenario("estimates_x0.5", "kinematic estimates x0.5", estimates(0.5)),
         Scenario("estimates_x2", "kinematic estimates x2", estimates(2.0)),
     )

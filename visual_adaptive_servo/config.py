@@ -147,7 +147,11 @@ SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "
     ParamSpec("joint_names", lambda s, v: list(s.joint_names), "str_list",
               "Joint names in /joint_states and the command order (default: the URDF chain's)."),
     ParamSpec("pixel_noise_std", 0.0, "float", "Gaussian pixel noise std [px].", 0.0, 100.0),
-    ParamSpec("camera_delay_frames", 0, "int", "Camera latency in whole frames.", 0, 100),
+    ParamSpec("camera_rate", 0.0, "float",
+              "Camera frames per second; 0 = one frame per control_period [Hz].", 0.0, None),
+    ParamSpec("camera_latency", 0.0, "float",
+              "Time from a frame's capture to its publication, rounded up to the control period "
+              "[s]; the frame is stamped with its capture time.", 0.0, 10.0),
     ParamSpec("seed", 0, "int", "Seed of the pixel noise generator.", 0, 2**31 - 1),
 ) + camera_specs("camera.", "Simulated camera") + (
     ParamSpec("markers.radius", 0.03, "float",
@@ -257,6 +261,19 @@ CONTROLLER_PARAMS = (
               1e-5, 10.0),
     ParamSpec("image_bounds", [-320.0, 320.0, -240.0, 240.0], "float_list",
               "Valid feature region [u_min, u_max, v_min, v_max] [px]."),
+    ParamSpec("latency_compensation", True, "bool",
+              "Run at every joint sample on x_hat, the latest camera frame applied at its capture "
+              "time and predicted to now from the joints (false: take a frame as current when it "
+              "arrives and hold the command between frames)."),
+    ParamSpec("max_frame_age", 0.5, "float",
+              "Frames captured longer ago than this are refused; the joint buffer keeps this "
+              "much [s].", 1e-3, 10.0),
+    ParamSpec("frame_gain", 1.0, "float",
+              "Weight of a frame against the prediction at its capture time: 1 resets the "
+              "prediction to the frame, less filters pixel noise.", 1e-3, 1.0),
+    ParamSpec("drift_gain", 0.0, "float",
+              "Learn the prediction's drift from each frame's innovation with this gain "
+              "(0: off).", 0.0, 1.0),
     ParamSpec("safety.hold_time", 0.05, "float",
               "Hold the last valid command this long after input goes bad [s].", 0.0, 10.0,
               True),
@@ -442,6 +459,9 @@ class SimConfig(_ValidatedParams):
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
                               f"got {v['timing_mode']!r}")
+        if v["camera_rate"] * v["control_period"] > 1.0 + 1e-9:
+            raise ConfigError(f"{section}.camera_rate: at most one frame per control period "
+                              f"({1.0 / v['control_period']:g} Hz), got {v['camera_rate']}")
         camera = _camera(v, "camera.", section)
         return cls(v, arm, camera)
 

@@ -37,6 +37,7 @@ from math import isfinite, sqrt
 import numpy as np
 
 from .config import ControllerConfig, check_alpha_gamma
+from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
@@ -387,7 +388,14 @@ def validate_vector(name, value, size):
 
 
 class AdaptiveVisualTracker:
-    """The sampled controller: ``step(t, q, qd, x)`` -> :class:`StepResult`.
+    """The sampled controller: ``step(t, q, qd, x, x_stamp)`` -> :class:`StepResult`.
+
+    It runs at every joint sample; a camera frame (pixels x captured at x_stamp)
+    may come with it or not.  With ``latency_compensation`` (the default) the law
+    sees x_hat, the latest frame re-predicted to the sample time from the joint
+    measurements (:mod:`.prediction`); without it, a frame is taken as current
+    when it arrives and samples without a frame hold the last command (the
+    behaviour of a controller that runs once per camera frame).
 
     Integration: the state (x_o and the estimates) is advanced by forward Euler
     over the time since the last accepted sample, using the rates computed there;
@@ -408,12 +416,18 @@ class AdaptiveVisualTracker:
     so recovery has no jump.
     """
 
+    #: the baselines have no model-based predictor and take frames as current
+    compensates_latency = True
+
     def __init__(self, config: ControllerConfig):
         self.config = config
         self.model = config.model
         self.trajectory = config.trajectory
         self.gains = Gains(config.K, config.alpha, config.gamma, config.Gamma_d,
                            config.Gamma_z_perp, config.Gamma_z)
+        self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
+        self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
+                                        config["drift_gain"])
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
                                       config["projection.a_z_min"], config["projection.a_z_max"],
@@ -435,6 +449,9 @@ class AdaptiveVisualTracker:
         self.t_last_tau = None
         self.stale = False
         self._rejecting = ()        # kinds of problem of the current rejection streak
+        self.predictor.reset()
+        self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
+                       "age_max": 0.0, "last_age": float("nan")}
 
     def update_gains(self, **changes):
         """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
@@ -460,10 +477,23 @@ class AdaptiveVisualTracker:
                              f"image bounds {list(self.config.image_bounds)}: {pixels}")
         return x
 
-    def step(self, t, q, qd, x):
-        """Process one sample; never raises on bad measurements (see class doc)."""
+    def step(self, t, q, qd, x=None, x_stamp=None):
+        """Process one joint sample and the camera frame that came with it, if any.
+
+        Parameters
+        ----------
+        t : float
+            Time of the joint sample [s].
+        q, qd : (n,)
+            Joint positions and velocities at t.
+        x : (2m,) or None
+            Pixels of the camera frame that arrived with this sample (None: none did).
+        x_stamp : float, optional
+            Capture time of that frame (default t: captured now).
+
+        Never raises on bad measurements (see the class docstring).
+        """
         n = self.model.n
-        problems = []
         try:
             t = float(t)
             if not isfinite(t):
@@ -477,18 +507,90 @@ class AdaptiveVisualTracker:
             qd = validate_vector("joint velocities qd", qd, n)
         except InputError as exc:
             return self._reject(t, None, None, [str(exc)])
-        try:
-            x = self._check_feature(x)
-        except InputError as exc:
-            problems.append(str(exc))
-            if (self.t_last_feature is None
-                    or t - self.t_last_feature >= self.config["safety.camera_timeout"]):
-                if not self.stale and self.t_last_feature is not None:
-                    log.warning("camera stale: no valid feature for %.3f s",
-                                t - self.t_last_feature)
-                self.stale = self.t_last_feature is not None
+        problems, frame, stamp = [], None, t
+        if x is None and not self.compensate:
+            problems.append("feature x: missing")
+        elif x is not None:
+            self.frames["received"] += 1
+            try:
+                frame = self._check_feature(x)
+                stamp = t if x_stamp is None else float(x_stamp)
+                if not isfinite(stamp):
+                    raise InputError("frame: stamp not finite")
+                if self.compensate:
+                    why = self.predictor.check_stamp(stamp, t)
+                    if why is not None:
+                        raise InputError(f"frame: {why}")
+            except (InputError, TypeError, ValueError) as exc:
+                self.frames["rejected"] += 1
+                problems.append(str(exc))
+                frame = None
+        if self.compensate:
+            return self._step_predicted(t, q, qd, frame, stamp, problems)
+        if frame is None:
+            self._check_stale(t)
             return self._reject(t, q, qd, problems)
+        self._count_frame(t, stamp)
+        return self._sample(t, q, qd, frame, self.model.kinematic_tensors(q, qd), True)
 
+    def _check_stale(self, t):
+        """Mark the camera stale when no frame was applied for ``safety.camera_timeout``."""
+        if (self.t_last_feature is None
+                or t - self.t_last_feature >= self.config["safety.camera_timeout"]):
+            if not self.stale and self.t_last_feature is not None:
+                log.warning("camera stale: no valid frame for %.3f s", t - self.t_last_feature)
+            self.stale = self.t_last_feature is not None
+        return self.stale
+
+    def _count_frame(self, t, stamp):
+        age = t - stamp
+        self.frames["applied"] += 1
+        self.frames["late"] += age > 1e-9
+        self.frames["age_sum"] += age
+        self.frames["age_max"] = max(self.frames["age_max"], age)
+        self.frames["last_age"] = age
+
+    def _step_predicted(self, t, q, qd, frame, stamp, problems):
+        """Latency compensation: the law sees x_hat, the frame re-predicted to now.
+
+        What replaces the measured x in eqs (10) and (18)-(25): x_hat(t) of
+        :class:`~.prediction.FramePredictor`, which equals the frame at its capture
+        time and follows x_hat_dot = Z_hat^-1 J_hat(q, x_hat) q_dot from the joint
+        samples since (docs/latency.md).
+        """
+        tensors = self.model.kinematic_tensors(q, qd)
+        if frame is not None:
+            x_hat = self.predictor.correct(stamp, frame, t)
+        else:
+            x_hat = self.predictor.predict(t)
+        if x_hat is None:
+            problems = problems or ["feature x: waiting for the first camera frame"]
+        elif frame is None and self._check_stale(t):
+            problems = problems or [f"feature x: no camera frame for "
+                                    f"{t - self.t_last_feature:.3f} s (camera stale)"]
+        else:
+            if frame is not None:
+                self._count_frame(t, stamp)
+            result = self._sample(t, q, qd, x_hat, tensors, frame is not None)
+            state = result.state if result.status == "ok" else self.state
+            self.predictor.commit(t, x_hat, self._prediction_rate(tensors, qd, state),
+                                  stamp if frame is not None else None)
+            if problems and result.status == "ok":
+                result = replace(result, problems=tuple(problems))
+            return result
+        # not run: keep the joint buffer continuous for the frames still to come
+        self.predictor.commit(t, x_hat, self._prediction_rate(tensors, qd, self.state),
+                              stamp if frame is not None else None)
+        return self._reject(t, q, qd, problems)
+
+    @staticmethod
+    def _prediction_rate(tensors, qd, state):
+        """(J_perp_hat q_dot, Z_hat_dot, Z_hat) per image coordinate with ``state``'s estimates."""
+        _, _, _, Zh, Zh_rate, J_perp, _ = estimated_kinematics(tensors, qd, state)
+        return J_perp.dot(qd), Zh_rate, Zh
+
+    def _sample(self, t, q, qd, x, tensors, with_frame):
+        """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit."""
         restarting = self.t_last is None or self.stale
         if restarting:
             state = replace(self.state, x_obs=x.copy())
@@ -500,7 +602,6 @@ class AdaptiveVisualTracker:
             desired = self.desired
             dt = min(t - self.t_last, self.config["max_dt"])
             state = self.state.advanced(self.rates, dt)
-        tensors = self.model.kinematic_tensors(q, qd)
         projection = self.projection
         if projection is not None:
             if projection.interior(state, tensors[0]):
@@ -526,7 +627,9 @@ class AdaptiveVisualTracker:
         if restarting and self.stale:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
         self.desired = desired
-        self.state, self.rates, self.t_last, self.t_last_feature = state, out.rates, t, t
+        self.state, self.rates, self.t_last = state, out.rates, t
+        if with_frame:
+            self.t_last_feature = t
         self.stale = False
         if self._rejecting:
             log.info("input valid again at t=%.4f", t)

@@ -45,7 +45,8 @@ def plot_run(series, out_dir, labels):
     err = series["x"] - series["x_d"]
     err_true = series["x_true"] - series["x_d"]
     noisy = bool(np.nanmax(np.abs(err - err_true)) > 1e-9) if len(t) else False
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, (ax, ax_max) = plt.subplots(2, 1, figsize=(7, 6.5), sharex=True,
+                                     gridspec_kw={"height_ratios": (3, 2)})
     for i in range(err.shape[1]):
         axis, point = "uv"[i % 2], i // 2 + 1
         name = f"{axis}{point} - {axis}d{point}"
@@ -54,10 +55,15 @@ def plot_run(series, out_dir, labels):
             ax.plot(t, err_true[:, i], color=line.get_color(), label=f"{name} true")
         else:
             ax.plot(t, err[:, i], label=name)
-    ax.set(xlabel="time [s]", ylabel="image error [px]",
-           title="Image-space tracking error x - x_d (paper Fig. 2)")
+    ax.set(ylabel="image error [px]", title="Image-space tracking error x - x_d (paper Fig. 2)")
     ax.grid(True)
-    ax.legend()
+    ax.legend(fontsize=7, ncol=2)
+    # the summary figures use the largest point error, shown here on a log scale
+    m = err.shape[1] // 2
+    largest = np.linalg.norm(err_true.reshape(len(t), m, 2), axis=2).max(axis=1)
+    ax_max.semilogy(t, np.maximum(largest, 1e-6), lw=0.8, color="k")
+    ax_max.set(xlabel="time [s]", ylabel="largest point error [px]")
+    ax_max.grid(True, which="both", alpha=0.4)
     paths.append(_save(fig, os.path.join(out_dir, "tracking_error.png")))
 
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -82,24 +88,33 @@ def plot_run(series, out_dir, labels):
     for ax, key, title in zip(axes, ("a_z_perp", "a_z", "a_d"),
                               ("a_z_perp (eq 24)", "a_z (eq 25)", "a_d (eq 23)")):
         for i, name in enumerate(labels[key]):
-            ax.plot(t, series[key][:, i], label=name)
-        ax.set(ylabel="estimate", title=title)
+            ax.plot(t, series[key][:, i], label=name, lw=0.8)
+        count = len(labels[key])
+        ax.set(ylabel="estimate", title=f"{title}, {count} entries")
         ax.grid(True)
-        ax.legend(fontsize=7, ncol=4)
+        if count <= 12:
+            ax.legend(fontsize=7, ncol=4)
     axes[-1].set_xlabel("time [s]")
     paths.append(_save(fig, os.path.join(out_dir, "parameters.png")))
 
     fig, ax = plt.subplots(figsize=(6, 6))
     for i in range(series["x"].shape[1] // 2):
         u, v = 2 * i, 2 * i + 1
+        tag = f"{i + 1}" if series["x"].shape[1] > 2 else ""
+        first = i == 0
         ax.plot(series["x"][:, u], series["x"][:, v], ".", ms=1, alpha=0.3, color="tab:orange",
-                label="x measured")
+                label="x measured" if first else None)
         ax.plot(series["x_true"][:, u], series["x_true"][:, v], lw=1, color="tab:orange",
-                label="x")
+                label="x" if first else None)
         ax.plot(series["x_obs"][:, u], series["x_obs"][:, v], lw=1, color="tab:blue",
-                label="x_o")
-        ax.plot(series["x_d"][:, u], series["x_d"][:, v], "k--", lw=1, label="x_d")
-        ax.plot(series["x_true"][0, u], series["x_true"][0, v], "go", label="start")
+                label="x_o" if first else None)
+        ax.plot(series["x_d"][:, u], series["x_d"][:, v], "k--", lw=1,
+                label="x_d" if first else None)
+        ax.plot(series["x_true"][0, u], series["x_true"][0, v], "go",
+                label="start" if first else None)
+        if tag:
+            ax.annotate(tag, (series["x_true"][0, u], series["x_true"][0, v]),
+                        textcoords="offset points", xytext=(5, 5))
     ax.set(xlabel="u [px]", ylabel="v [px]", title="Image-plane path")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True)

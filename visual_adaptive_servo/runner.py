@@ -149,7 +149,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         for k in range(steps):
             truth = sim.measure()
             meas = truth if faults is None else faults(k, truth)
-            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
+            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
             counters["rejected"] += res.status != "ok"
             counters["fallback"] += res.status == "fallback"
             counters["saturated"] += res.saturated
@@ -195,12 +195,30 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         if recorder is not None:
             recorder.close()
     data = series.view()
+    counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
     summary = summarize(data, series.status, wall, diverged, reason, counters)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
                    outputs=["summary.json", "timeseries.csv"])
     write_outputs(out_dir, data, series.status, model, summary, record, plots)
     return summary
+
+
+def camera_figures(frames, feature_camera):
+    """Frame counts and ages for summary.json: what the camera sent, what the controller used.
+
+    ``frames_dropped`` counts published frames the controller did not apply (refused:
+    invalid, out of order, too old); ``frame_age`` is the time from capture to use.
+    """
+    figures = {"frames_captured": feature_camera.captured,
+               "frames_published": feature_camera.published}
+    if frames is not None:
+        applied = frames["applied"]
+        figures.update(frames_applied=applied, frames_late=frames["late"],
+                       frames_dropped=frames["received"] - applied,
+                       frame_age_mean_s=frames["age_sum"] / applied if applied else math.nan,
+                       frame_age_max_s=frames["age_max"] if applied else math.nan)
+    return figures
 
 
 def summarize(data, status, wall, diverged, reason, counters):

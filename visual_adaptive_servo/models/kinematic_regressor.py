@@ -83,11 +83,12 @@ class Reduction:
     full_labels: tuple
 
 
-def _cross(a, b):
-    """Cross product over the last axis (np.cross costs ~10 us on these small arrays)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+# (v @ _SKEW).reshape(3, 3) is the cross-product matrix [v]x (one product for many vectors)
+_SKEW = np.zeros((3, 9))
+_SKEW[2, 1], _SKEW[1, 2], _SKEW[2, 3] = -1.0, 1.0, 1.0
+_SKEW[0, 5], _SKEW[1, 6], _SKEW[0, 7] = -1.0, -1.0, 1.0
+# symbolic table rows of the columns: the known part w0_i (one row per point) and the constant 1
+_W0, _ONE = -1, -2
 
 
 class KinematicRegressor:
@@ -110,8 +111,9 @@ class KinematicRegressor:
         self.lengths = self._lengths(unknown)
         self._structure()
         self._columns()
-        self.z_reduction = self._reduce(self._z_samples, self.z_full_labels)
-        self.perp_reduction = self._reduce(self._perp_samples, self.perp_full_labels)
+        z_samples, perp_samples = self._full_samples()
+        self.z_reduction = self._reduce(z_samples, self.z_full_labels)
+        self.perp_reduction = self._reduce(perp_samples, self.perp_full_labels)
         self._gather()
 
     # -- structure -----------------------------------------------------------------
@@ -176,9 +178,9 @@ class KinematicRegressor:
         self._C = self._A @ K @ K
         self._axes = np.array([j.origin_rotation @ j.axis for j in chain.joints])
         self._revolute = np.array([not j.prismatic for j in chain.joints], dtype=float)
-        # dv_s/dq_l = omega_l x v_s for revolute joints l before frame f_s
-        self._moves = ((np.arange(n)[None, :] < self._frame[:, None])
-                       * self._revolute[None, :])[:, :, None]
+        # dv_s/dq_l = omega_l x v_s for revolute joints l before frame f_s, as (n, 1, S)
+        self._moves = ((np.arange(n)[:, None] < self._frame[None, :])
+                       * self._revolute[:, None])[:, None, :]
         # known part w0_i: constant coefficients of the known lengths, per point
         self._known = np.zeros((self.m, self.S))
         for L, s in zip(self.lengths, self._length_dir):
@@ -188,54 +190,49 @@ class KinematicRegressor:
 
     # -- evaluation ------------------------------------------------------------------
     def _evaluate(self, q, qd):
-        """Value, joint gradient and its rate of every column vector, per point.
+        """Value, joint gradient and its rate of every column vector: the lookup table.
 
-        Returns T (m, S+2, 3), dT and dT_rate (m, n, S+2, 3): rows 0..S-1 the
-        directions v_s, row S the known part w0_i, row S+1 the constant 1.
+        Returns V (R, 3), dV and dV_rate (n, 3, R) with R rows: the S directions
+        v_s, then (when there is a known part) w0_i of each point, then the
+        constant 1.  ``dV[l, :, r]`` is the derivative of row r by q_l.
         """
-        n, m, S = self.n, self.m, self.S
+        n, S = self.n, self.S
         sin_q, cos_q = np.sin(q), np.cos(q)
         M = self._A + sin_q[:, None, None] * self._B + (1.0 - cos_q)[:, None, None] * self._C
         R = np.empty((n + 1, 3, 3))
         R[0] = np.eye(3)
         for k in range(n):
             R[k + 1] = R[k].dot(M[k])
-        axes = np.einsum("kij,kj->ki", R[:n], self._axes)         # omega_l (or prismatic u_l)
+        axes = (R[:n] @ self._axes[:, :, None])[:, :, 0]           # omega_l (or prismatic u_l)
         Omega = np.zeros((n + 1, 3))
         Omega[1:] = np.cumsum((qd * self._revolute)[:, None] * axes, axis=0)
-        V = np.einsum("sij,sj->si", R[self._frame], self._dirs)   # (S, 3)
-        V_dot = _cross(Omega[self._frame], V)
-        axes_dot = _cross(Omega[:n], axes)
-        dV = _cross(axes[None, :, :], V[:, None, :]) * self._moves            # (S, n, 3)
-        dV_rate = (_cross(axes_dot[None, :, :], V[:, None, :])
-                   + _cross(axes[None, :, :], V_dot[:, None, :])) * self._moves
-
-        T = np.zeros((m, S + 2, 3))
-        dT = np.zeros((m, n, S + 2, 3))
-        dT_rate = np.zeros((m, n, S + 2, 3))
-        T[:, :S] = V
-        T[:, S + 1] = 1.0
-        dT[:, :, :S] = dV.transpose(1, 0, 2)
-        dT_rate[:, :, :S] = dV_rate.transpose(1, 0, 2)
-        if self.has_w0:
-            coef = self._known.copy()
-            coef_rate = np.zeros_like(coef)
-            for k, s in self._prismatic:
-                coef[:, s] += q[k]
-                coef_rate[:, s] += qd[k]
-            T[:, S] = coef @ V
-            dT[:, :, S] = np.einsum("is,slc->ilc", coef, dV)
-            dT_rate[:, :, S] = (np.einsum("is,slc->ilc", coef, dV_rate)
-                                + np.einsum("is,slc->ilc", coef_rate, dV))
-            for k, s in self._prismatic:
-                dT[:, k, S] += V[s]
-                dT_rate[:, k, S] += V_dot[s]
-        return T, dT, dT_rate
+        skews = (np.vstack([axes, Omega]) @ _SKEW).reshape(-1, 3, 3)
+        axes_x, Omega_x = skews[:n], skews[n:]
+        axes_dot_x = ((Omega_x[:n] @ axes[:, :, None])[:, :, 0] @ _SKEW).reshape(n, 3, 3)
+        V = (R[self._frame] @ self._dirs[:, :, None])[:, :, 0]    # (S, 3)
+        V_dot = (Omega_x[self._frame] @ V[:, :, None])[:, :, 0]   # Omega_f x v
+        dV = (axes_x @ V.T) * self._moves                           # (n, 3, S)
+        dV_rate = (axes_dot_x @ V.T + axes_x @ V_dot.T) * self._moves
+        if not self.has_w0:
+            return (np.vstack([V, self._one_row]), np.concatenate([dV, self._zero_col], axis=2),
+                    np.concatenate([dV_rate, self._zero_col], axis=2))
+        coef, coef_rate = self._known.copy(), np.zeros((self.m, S))
+        for k, s in self._prismatic:
+            coef[:, s] += q[k]
+            coef_rate[:, s] += qd[k]
+        dW0 = dV @ coef.T                                            # (n, 3, m)
+        dW0_rate = dV_rate @ coef.T + dV @ coef_rate.T
+        for k, s in self._prismatic:
+            dW0[k] += V[s][:, None]
+            dW0_rate[k] += V_dot[s][:, None]
+        return (np.vstack([V, coef @ V, self._one_row]),
+                np.concatenate([dV, dW0, self._zero_col], axis=2),
+                np.concatenate([dV_rate, dW0_rate, self._zero_col], axis=2))
 
     # -- the full columns and their reduction --------------------------------------------
     def _columns(self):
-        S, m = self.S, self.m
-        z_cols, perp_cols = [], []   # (table row, coordinate, point mask, label) (+ image row)
+        m = self.m
+        z_cols, perp_cols = [], []   # (table row, coordinate, point mask, label, tag)
         for L, s in zip(self.lengths, self._length_dir):
             if not L.unknown:
                 continue
@@ -244,55 +241,79 @@ class KinematicRegressor:
                 z_cols.append((s, c, mask, f"d3{AXES[c]}*{L.name}", ("len", L, c)))
             for a in range(2):
                 for b in range(3):
-                    perp_cols.append((s, a, b, mask, f"D{a + 1}{AXES[b]}*{L.name}",
+                    perp_cols.append((s, (a, b), mask, f"D{a + 1}{AXES[b]}*{L.name}",
                                       ("len", L, a, b)))
         if self.has_w0:
             ones = np.ones(m)
             for c in range(3):
-                z_cols.append((S, c, ones, f"d3{AXES[c]}*known", ("w0", c)))
+                z_cols.append((_W0, c, ones, f"d3{AXES[c]}*known", ("w0", c)))
             for a in range(2):
                 for b in range(3):
-                    perp_cols.append((S, a, b, ones, f"D{a + 1}{AXES[b]}*known", ("w0", a, b)))
-        z_cols.append((S + 1, 0, np.ones(m), "d0", ("d0",)))
+                    perp_cols.append((_W0, (a, b), ones, f"D{a + 1}{AXES[b]}*known",
+                                      ("w0", a, b)))
+        z_cols.append((_ONE, 0, np.ones(m), "d0", ("d0",)))
         self._z_cols, self._perp_cols = z_cols, perp_cols
         self.z_full_labels = tuple(c[3] for c in z_cols)
-        self.perp_full_labels = tuple(c[4] for c in perp_cols)
+        self.perp_full_labels = tuple(c[3] for c in perp_cols)
+        self._one_row = np.ones((1, 3))
+        self._zero_col = np.zeros((self.n, 3, 1))
 
-    def _z_full(self, T, dT):
-        rows = np.array([c[0] for c in self._z_cols])
-        coords = np.array([c[1] for c in self._z_cols])
-        mask = np.array([c[2] for c in self._z_cols]).T
-        return T[:, rows, coords] * mask
+    def _indices(self, columns):
+        """Per (point, column) table rows and coordinates, and the point masks, (m, p) each."""
+        m, S = self.m, self.S
+        rows = np.empty((m, len(columns)), dtype=int)
+        for p, col in enumerate(columns):
+            row = col[0]
+            rows[:, p] = (S + np.arange(m) if row == _W0 else
+                          S + (m if self.has_w0 else 0) if row == _ONE else row)
+        coords = np.array([c[1][1] if isinstance(c[1], tuple) else c[1] for c in columns],
+                          dtype=int)
+        mask = np.array([c[2] for c in columns]).reshape(-1, m).T
+        return rows, np.broadcast_to(coords, rows.shape).copy(), mask
 
-    def _perp_full(self, dT):
-        rows = np.array([c[0] for c in self._perp_cols])
-        comps = np.array([c[2] for c in self._perp_cols])
-        image_row = np.array([c[1] for c in self._perp_cols])
-        mask = np.array([c[3] for c in self._perp_cols]).T
-        G = dT[:, :, rows, comps] * mask[:, None, :]
-        select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)
-        return (G[:, None] * select[None, :, None, :]).reshape(2 * self.m, self.n, -1)
+    def _perp_gather(self, columns):
+        rows, comps, mask = self._indices(columns)
+        image_row = np.array([c[1][0] for c in columns], dtype=int)
+        select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)   # (2, p)
+        factor = mask[:, None, None, :] * select[None, :, None, :]              # (m, 2, 1, p)
+        return rows, comps, factor
+
+    def _assemble(self, table, z_index, perp_index):
+        """(H, dH, dH_rate, W, W_rate) of the columns ``z_index``/``perp_index`` from the table."""
+        V, dV, dV_rate = table
+        zr, zc, zmask = z_index
+        pr, pc, factor = perp_index
+        H = V[zr, zc] * zmask
+        dH = dV[:, zc, zr].transpose(1, 0, 2) * zmask[:, None, :]
+        dH_rate = dV_rate[:, zc, zr].transpose(1, 0, 2) * zmask[:, None, :]
+        shape = (2 * self.m, self.n, factor.shape[-1])
+        W = (dV[:, pc, pr].transpose(1, 0, 2)[:, None] * factor).reshape(shape)
+        W_rate = (dV_rate[:, pc, pr].transpose(1, 0, 2)[:, None] * factor).reshape(shape)
+        return H, dH, dH_rate, W, W_rate
 
     def _sample_configurations(self):
         rng = np.random.default_rng(0)
         lo = np.where(self._revolute > 0, -np.pi, -1.0)
         return rng.uniform(lo, -lo, size=(_SAMPLES, self.n))
 
+    def _full_samples(self):
+        """Every full column function at the sample configurations (H and W stacked by rows)."""
+        z_index, perp_index = self._indices(self._z_cols), self._perp_gather(self._perp_cols)
+        z_rows, perp_rows = [], []
+        for q in self._sample_configurations():
+            H, _, _, W, _ = self._assemble(self._evaluate(q, np.zeros(self.n)), z_index,
+                                           perp_index)
+            z_rows.append(H)
+            perp_rows.append(W.reshape(-1, W.shape[-1]))
+        return np.vstack(z_rows), np.vstack(perp_rows)
+
     @property
     def _z_samples(self):
-        rows = []
-        for q in self._sample_configurations():
-            T, dT, _ = self._evaluate(q, np.zeros(self.n))
-            rows.append(self._z_full(T, dT))
-        return np.vstack(rows)
+        return self._full_samples()[0]
 
     @property
     def _perp_samples(self):
-        rows = []
-        for q in self._sample_configurations():
-            _, dT, _ = self._evaluate(q, np.zeros(self.n))
-            rows.append(self._perp_full(dT).reshape(-1, len(self._perp_cols)))
-        return np.vstack(rows)
+        return self._full_samples()[1]
 
     @staticmethod
     def _reduce(samples, labels):
@@ -314,43 +335,25 @@ class KinematicRegressor:
             raise ArithmeticError(f"kinematic regressor reduction: residual {residual:.3g} "
                                   f"(scale {scale:.3g}); the column functions could not be "
                                   f"reduced to an exact basis")
-        E[np.abs(E) < 1e-12] = 0.0
         names = []
         for row, b in zip(E, basis):
-            others = int(np.count_nonzero(row)) - 1
+            # E is kept whole (URDFs' rounded pi/2 give true entries ~1e-12); labels
+            # mention only the combinations that matter
+            others = int(np.count_nonzero(np.abs(row) > 1e-9)) - 1
             names.append(labels[b] + (f"+{others} more" if others > 0 else ""))
         return Reduction(basis, E, tuple(names), tuple(labels))
 
     def _gather(self):
         zb, pb = self.z_reduction.basis, self.perp_reduction.basis
-        self._z_rows = np.array([self._z_cols[b][0] for b in zb], dtype=int)
-        self._z_coords = np.array([self._z_cols[b][1] for b in zb], dtype=int)
-        self._z_mask = np.array([self._z_cols[b][2] for b in zb]).reshape(-1, self.m).T
-        self._p_rows = np.array([self._perp_cols[b][0] for b in pb], dtype=int)
-        self._p_comps = np.array([self._perp_cols[b][2] for b in pb], dtype=int)
-        self._p_mask = np.array([self._perp_cols[b][3] for b in pb]).reshape(-1, self.m).T
-        image_row = np.array([self._perp_cols[b][1] for b in pb], dtype=int)
-        self._p_select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)
+        self._z_index = self._indices([self._z_cols[b] for b in zb])
+        self._perp_index = self._perp_gather([self._perp_cols[b] for b in pb])
         self.p_z, self.p_perp = len(zb), len(pb)
 
     # -- public ----------------------------------------------------------------------
     def tensors(self, q, qd):
         """``(H, dH, dH_rate, W, W_rate)`` at (q, q_dot): shapes as in RobotCameraModel."""
-        q = np.asarray(q, dtype=float)
-        qd = np.asarray(qd, dtype=float)
-        T, dT, dT_rate = self._evaluate(q, qd)
-        rows, coords, mask = self._z_rows, self._z_coords, self._z_mask
-        H = T[:, rows, coords] * mask
-        dH = dT[:, :, rows, coords] * mask[:, None, :]
-        dH_rate = dT_rate[:, :, rows, coords] * mask[:, None, :]
-        m2, n = 2 * self.m, self.n
-        pmask = self._p_mask[:, None, None, :]
-        select = self._p_select[None, :, None, :]
-        G = dT[:, :, self._p_rows, self._p_comps][:, None] * pmask
-        G_rate = dT_rate[:, :, self._p_rows, self._p_comps][:, None] * pmask
-        W = (G * select).reshape(m2, n, -1)
-        W_rate = (G_rate * select).reshape(m2, n, -1)
-        return H, dH, dH_rate, W, W_rate
+        table = self._evaluate(np.asarray(q, dtype=float), np.asarray(qd, dtype=float))
+        return self._assemble(table, self._z_index, self._perp_index)
 
     def parameters(self, camera_matrix, lengths=None):
         """(a_z_perp, a_z) of this chain seen through ``camera_matrix``.
@@ -373,6 +376,6 @@ class KinematicRegressor:
             values.update(lengths)
         z_full = np.array([d3[c[4][2]] * values[c[4][1].name] if c[4][0] == "len"
                            else d3[c[4][1]] if c[4][0] == "w0" else d0 for c in self._z_cols])
-        perp_full = np.array([D_bar[c[5][2], c[5][3]] * values[c[5][1].name] if c[5][0] == "len"
-                              else D_bar[c[5][1], c[5][2]] for c in self._perp_cols])
+        perp_full = np.array([D_bar[c[4][2], c[4][3]] * values[c[4][1].name] if c[4][0] == "len"
+                              else D_bar[c[4][1], c[4][2]] for c in self._perp_cols])
         return self.perp_reduction.E @ perp_full, self.z_reduction.E @ z_full
