@@ -30,6 +30,7 @@ sign (those show up at 1e-3 or more).
 import os
 
 import numpy as np
+import pinocchio as pin
 import pybullet
 import pybullet_data
 import pytest
@@ -244,6 +245,22 @@ def test_polarised_regressor_splits_into_m_c_and_g(iiwa, rng):
         M_xi_dot = iiwa.regressor(q, qd, zero, xi_dot) @ a - g
         np.testing.assert_allclose(M_xi_dot, iiwa.mass_matrix(q) @ xi_dot, rtol=0,
                                    atol=TORQUE_RTOL * np.abs(M_xi_dot).max())
+
+
+def test_two_call_regressor_equals_the_five_call_polarisation(rng):
+    # Y_d = Y(q, 0, xi_dot) + 1/2 [Y(q, qd + xi, 0) - Y(q, qd, 0) - Y(q, xi, 0) + Y(q, 0, 0)]
+    arm = RigidBodyDynamics(data_urdf(IIWA[0]), *IIWA[1:], reduce=False)
+    zero = np.zeros(7)
+
+    def Y(q, v, a):
+        return pin.computeJointTorqueRegressor(arm.model, arm.data, q, v, a).copy()
+
+    for _ in range(10):
+        q, qd, xi, xi_dot = random_motion(rng, 7)
+        polarised = Y(q, zero, xi_dot) + 0.5 * (Y(q, qd + xi, zero) - Y(q, qd, zero)
+                                                - Y(q, xi, zero) + Y(q, zero, zero))
+        np.testing.assert_allclose(arm.regressor(q, qd, xi, xi_dot), polarised, rtol=0,
+                                   atol=1e-12 * np.abs(polarised).max())
 
 
 def test_base_parameters_reproduce_full_parameter_torques(rng):
