@@ -40,8 +40,9 @@ setup(
         "PyYAML>=6.0",
         "matplotlib>=3.6",
         "rosbags>=0.10.4",
-        # Pinocchio (rigid-body dynamics of URDF arms) and scipy (its base-parameter QR)
-        "pin>=3.0",
+        # Pinocchio (rigid-body dynamics of URDF arms) and scipy (its base-parameter QR);
+        # with numpy 1.26 pip can only resolve pin 2.7 (pin 3+ wheels need numpy >= 2.2)
+        "pin>=2.7",
         "scipy>=1.8",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
