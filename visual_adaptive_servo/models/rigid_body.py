@@ -143,6 +143,8 @@ class RigidBodyDynamics:
         self.joint_names = tuple(self.model.names[1:])
         self.link_names = tuple(_child_link(full, j) for j in chain)
         self._q_zero = pin.neutral(self.model)
+        # no continuous joint: Pinocchio's configuration is q itself
+        self._q_is_configuration = self.model.nq == self.n
         self._a_full = np.concatenate([self.model.inertias[j].toDynamicParameters()
                                        for j in range(1, self.model.njoints)])
         full_labels = [f"{link}.{name}" for link in self.link_names
@@ -166,7 +168,7 @@ class RigidBodyDynamics:
         velocity q from the zero configuration maps every joint type exactly.
         """
         q = np.asarray(q, dtype=float)
-        if self.model.nq == self.n:
+        if self._q_is_configuration:
             return q
         return pin.integrate(self.model, self._q_zero, q)
 
