@@ -61,6 +61,8 @@ BASE_SEED = 20150101
 RANK_TOLERANCE = 1e-9
 #: largest relative residual of Y_full = Y_full[:, B] E accepted over the samples
 RECONSTRUCTION_TOLERANCE = 1e-10
+#: |E| below which a standard parameter is not named in a base parameter's label
+LABEL_COEFFICIENT = 1e-9
 _INV_SQRT8 = 1.0 / np.sqrt(8.0)
 
 
@@ -151,8 +153,12 @@ class RigidBodyDynamics:
                        for name in LINK_PARAMETER_NAMES]
         if reduce:
             self.base_columns, self.base_map = self._base_parameters()
+            # E keeps every entry (exact zeros come out as ~1e-17, and URDF round-off
+            # such as cos(1.57079632679) = 5e-12 gives true entries of ~1e-12); only
+            # the labels ignore coefficients that small
             self.parameter_labels = tuple(
-                full_labels[b] + ("+..." if np.count_nonzero(row) > 1 else "")
+                full_labels[b] + ("+..." if np.count_nonzero(np.abs(row) > LABEL_COEFFICIENT)
+                                  > 1 else "")
                 for b, row in zip(self.base_columns, self.base_map))
         else:
             self.base_columns = np.arange(self._a_full.size)
@@ -250,9 +256,6 @@ class RigidBodyDynamics:
         E = np.zeros((rank, W.shape[1]))
         E[:, perm[:rank]] = np.eye(rank)
         E[:, perm[rank:]] = solve_triangular(R[:rank, :rank], R[:rank, rank:])
-        # entries that are round-off of exact zeros (|E| ~ 1e-16) would make
-        # every label a combination
-        E[np.abs(E) < 1e-10] = 0.0
         order = np.argsort(perm[:rank])
         B, E = perm[:rank][order], E[order]
         residual = np.abs(W - W[:, B] @ E).max() / np.abs(W).max()
