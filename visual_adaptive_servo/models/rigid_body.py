@@ -195,7 +195,7 @@ class RigidBodyDynamics:
         (u = q_dot, w = xi): the quadratic parts give 2/8 Y_h(u + w) - 1/4 Y_h(u - w),
         the acceleration and gravity parts 2 - 1 = 1 time each.  It replaces the
         five-call form of the module docstring (same values to ~1e-15 of the
-        torque scale, 2.2x faster for the iiwa).
+        torque scale; median 11 µs against 21 µs for the iiwa, benchmarks/bench_rigid_body.py).
         """
         q_pin = self._configuration(q)
         qd = np.asarray(qd, dtype=float)
