@@ -23,13 +23,13 @@ package_name = "visual_adaptive_servo"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=[package_name, "sim_bridge"],
+    packages=[package_name, package_name + ".models", "sim_bridge"],
     package_data={"sim_bridge": ["urdf/*.urdf"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config", glob("config/*.yaml") + glob("config/*.csv")),
         ("share/" + package_name + "/urdf", glob("sim_bridge/urdf/*.urdf")),
     ],
     python_requires=">=3.10",
@@ -40,6 +40,10 @@ setup(
         "PyYAML>=6.0",
         "matplotlib>=3.6",
         "rosbags>=0.10.4",
+        # Pinocchio (rigid-body dynamics of URDF arms) and scipy (its base-parameter QR);
+        # with numpy 1.26 pip can only resolve pin 2.7 (pin 3+ wheels need numpy >= 2.2)
+        "pin>=2.7",
+        "scipy>=1.8",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
