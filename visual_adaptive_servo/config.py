@@ -196,12 +196,24 @@ CONTROLLER_PARAMS = (
     ParamSpec("sample_time", 0.005, "float", "Nominal control period T [s].", 1e-5, 1.0),
     ParamSpec("K", lambda m, v: [0.001] * (2 * m.m), "float_list",
               "Diagonal of the feedback gain K of eq (22), (2m,).", 0.0, None, True),
+    ParamSpec("joint_damping.inertia_rate", 0.0, "float",
+              "Joint-space damping of s, D = rate x (estimated inertia matrix at the start), "
+              "added to eq (22) [1/s]; 0 = the paper's law.  Keeps Theorem 1 (see README).",
+              0.0, None),
+    ParamSpec("joint_damping.diagonal", lambda m, v: [0.0] * m.n, "float_list",
+              "A constant diagonal added to that damping [N m s/rad].", 0.0, None),
     ParamSpec("alpha", 10.0, "float", "Observer gain alpha of eq (10); alpha > gamma/3.",
               0.0, None),
     ParamSpec("gamma", 10.0, "float", "Reference gain gamma of eq (18); alpha > gamma/3.",
               0.0, None),
-    ParamSpec("Gamma_d", lambda m, v: [300.0] * m.p_d, "float_list",
-              "Diagonal of the dynamic adaptation gain Gamma_d of eq (23).", 0.0, None, True),
+    ParamSpec("Gamma_d_normalized", 300.0, "float",
+              "Default of Gamma_d: this divided by the square of each Y_d column's typical size, "
+              "so every parameter adapts like one with an O(1) column.", 0.0, None),
+    ParamSpec("Gamma_d", lambda m, v: list(v["Gamma_d_normalized"]
+                                           / np.maximum(m.dynamic_column_rms(), 0.1) ** 2),
+              "float_list",
+              "Diagonal of the dynamic adaptation gain Gamma_d of eq (23) (default from "
+              "Gamma_d_normalized).", 0.0, None, True),
     ParamSpec("Gamma_z_perp", lambda m, v: [600.0] * m.p_perp, "float_list",
               "Diagonal of Gamma_z_perp of eq (24).", 0.0, None, True),
     ParamSpec("Gamma_z", lambda m, v: [0.2] * m.p_z, "float_list",
@@ -529,8 +541,9 @@ class ControllerConfig(_ValidatedParams):
             CONTROLLER_PARAMS, params, section,
             lambda values: build_controller_model(values, section, search_dirs, model))
         m2 = 2 * model.m
-        lengths = {"K": m2, "Gamma_d": model.p_d, "Gamma_z_perp": model.p_perp,
-                   "Gamma_z": model.p_z, "a_z_perp_init": model.p_perp, "a_z_init": model.p_z,
+        lengths = {"K": m2, "Gamma_d": model.p_d, "joint_damping.diagonal": model.n,
+                   "Gamma_z_perp": model.p_perp, "Gamma_z": model.p_z,
+                   "a_z_perp_init": model.p_perp, "a_z_init": model.p_z,
                    "a_d_init": model.p_d, "trajectory.offset": m2, "trajectory.a_cos": m2,
                    "trajectory.a_sin": m2, "projection.a_z_perp_min": model.p_perp,
                    "projection.a_z_perp_max": model.p_perp, "projection.a_z_min": model.p_z,

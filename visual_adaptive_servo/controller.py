@@ -45,7 +45,12 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class Gains:
-    """Gains of eqs (10), (18), (22)-(25); matrices are diagonal, stored as vectors."""
+    """Gains of eqs (10), (18), (22)-(25); matrices are diagonal, stored as vectors.
+
+    ``D`` (n, n), optional, is a constant symmetric positive definite joint-space
+    damping on the sliding vector, tau = -J*^T K J* s - D s + Y_d a_d (see
+    :func:`joint_space_law`); None is the paper's law.
+    """
 
     K: np.ndarray
     alpha: float
@@ -53,6 +58,7 @@ class Gains:
     Gamma_d: np.ndarray
     Gamma_z_perp: np.ndarray
     Gamma_z: np.ndarray
+    D: np.ndarray | None = None
 
     def __post_init__(self):
         check_alpha_gamma(self.alpha, self.gamma)
@@ -316,6 +322,11 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
     s = qd - qr_dot                                   # eq (20)
     Y_d = model.dynamic_regressor(q, qd, qr_dot, qr_ddot)
     tau = Y_d.dot(state.a_d) - (gains.K * J_star.dot(s)).dot(J_star)  # eq (22)
+    if gains.D is not None:
+        # joint-space damping of s: V1_dot = -s^T (J*^T K J* + D) s <= -s^T J*^T K J* s, so
+        # Theorem 1's argument is unchanged; it lets a light joint (a wrist) get the damping
+        # the image-space K cannot give it without destabilising the heavy ones
+        tau = tau - gains.D.dot(s)
     a_d_dot = gains.Gamma_d * (qr_dot - qd).dot(Y_d)  # eq (23): -Gamma_d Y_d^T s
     if projection is not None:
         a_d_dot, active_d = projection.dynamic_rate(state.a_d, a_d_dot)
@@ -425,6 +436,7 @@ class AdaptiveVisualTracker:
         self.trajectory = config.trajectory
         self.gains = Gains(config.K, config.alpha, config.gamma, config.Gamma_d,
                            config.Gamma_z_perp, config.Gamma_z)
+        self.damping = None         # D of the joint-space damping, fixed at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
@@ -449,6 +461,8 @@ class AdaptiveVisualTracker:
         self.t_last_tau = None
         self.stale = False
         self._rejecting = ()        # kinds of problem of the current rejection streak
+        self.damping = None
+        self.gains = replace(self.gains, D=None)
         self.predictor.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
@@ -458,7 +472,7 @@ class AdaptiveVisualTracker:
         new_config = self.config.with_changes(**changes)
         self.config = new_config
         self.gains = Gains(new_config.K, new_config.alpha, new_config.gamma, new_config.Gamma_d,
-                           new_config.Gamma_z_perp, new_config.Gamma_z)
+                           new_config.Gamma_z_perp, new_config.Gamma_z, self.gains.D)
 
     def desired_at(self, t):
         if self.desired is None:
@@ -592,6 +606,8 @@ class AdaptiveVisualTracker:
     def _sample(self, t, q, qd, x, tensors, with_frame):
         """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit."""
         restarting = self.t_last is None or self.stale
+        if self.damping is None:
+            self._fix_damping(q)
         if restarting:
             state = replace(self.state, x_obs=x.copy())
             blend = (self.config.start_blend_time if self.t_last is None
@@ -637,6 +653,28 @@ class AdaptiveVisualTracker:
         self.last_tau, self.t_last_tau = tau, t
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
+
+    def _fix_damping(self, q):
+        """D = c M_hat(q0) + diag(d) from ``joint_damping.*``, at the first joint sample.
+
+        M_hat is the inertia matrix of the initial dynamic estimate at the start pose
+        (from the model's own regressor), made positive definite (eigenvalues floored
+        at 1e-6 of the largest): with D = c M_hat, D T M^-1 is about c T for every
+        mode of the arm, so one rate c suits a heavy shoulder and a light wrist alike.
+        """
+        c = self.config["joint_damping.inertia_rate"]
+        d = np.asarray(self.config["joint_damping.diagonal"], dtype=float)
+        D = np.diag(d)
+        if c > 0.0:
+            M_hat = self.model.estimated_mass_matrix(q, self.state.a_d)
+            w, V = np.linalg.eigh(0.5 * (M_hat + M_hat.T))
+            if w[0] <= 1e-6 * w[-1]:
+                log.warning("joint_damping: the initial dynamic estimate's inertia matrix is not "
+                            "positive definite at the start (eigenvalues %s); floored", w)
+            D = D + c * (V * np.maximum(w, 1e-6 * w[-1])) @ V.T
+        self.damping = D
+        if np.any(D):
+            self.gains = replace(self.gains, D=D)
 
     def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
         """The control law evaluated by :meth:`step` at time ``t`` (baselines override this).

@@ -129,6 +129,35 @@ class RobotCameraModel(ABC):
     def gravity_torque(self, q):
         """True gravity torque g(q) (n,)."""
 
+    def estimated_mass_matrix(self, q, a_d):
+        """M(q; a_d) (n, n) from the dynamic regressor: column j is Y_d(q, 0, 0, e_j) a_d - g."""
+        zero = np.zeros(self.n)
+        g = self.dynamic_regressor(q, zero, zero, zero).dot(a_d)
+        return np.array([self.dynamic_regressor(q, zero, zero, e).dot(a_d) - g
+                         for e in np.eye(self.n)]).T
+
+    # -- scales ------------------------------------------------------------------
+    def dynamic_column_rms(self, samples=200, seed=0):
+        """Typical size of each column of Y_d, (p_d,): RMS of its norm over random states.
+
+        States: q uniform in [-pi, pi], q_dot, xi, xi_dot standard normal (rad, rad/s,
+        rad/s^2).  A parametrisation whose gravity columns carry g (Pinocchio's) has
+        columns ~10x larger than one that folds g into the parameters (the paper's);
+        the default adaptation gain divides by the square of this, so every
+        parameter adapts at the rate the paper's gains give its O(1) columns.
+        """
+        cached = getattr(self, "_column_rms", None)
+        if cached is not None:
+            return cached
+        rng = np.random.default_rng(seed)
+        total = np.zeros(self.p_d)
+        for _ in range(samples):
+            q = rng.uniform(-np.pi, np.pi, self.n)
+            qd, xi, xi_dot = rng.normal(size=(3, self.n))
+            total += np.sum(self.dynamic_regressor(q, qd, xi, xi_dot) ** 2, axis=0)
+        self._column_rms = np.sqrt(total / samples)
+        return self._column_rms
+
     # -- Property 1, derived ----------------------------------------------------
     def depth(self, q, a_z):
         """z(q; a_z) = H(q) a_z, shape (m,)."""
