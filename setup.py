@@ -61,6 +61,7 @@ setup(
             "vas = visual_adaptive_servo.cli:main",
             "controller_node = visual_adaptive_servo.controller_node:main",
             "sim_node = sim_bridge.sim_node:main",
+            "feature_detector = visual_adaptive_servo.feature_detector_node:main",
         ],
     },
 )
