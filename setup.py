@@ -44,6 +44,7 @@ setup(
         # with numpy 1.26 pip can only resolve pin 2.7 (pin 3+ wheels need numpy >= 2.2)
         "pin>=2.7",
         "scipy>=1.8",
+        "opencv-python-headless>=4.8",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
@@ -60,6 +61,7 @@ setup(
             "vas = visual_adaptive_servo.cli:main",
             "controller_node = visual_adaptive_servo.controller_node:main",
             "sim_node = sim_bridge.sim_node:main",
+            "feature_detector = visual_adaptive_servo.feature_detector_node:main",
         ],
     },
 )

@@ -29,13 +29,10 @@ from __future__ import annotations
 import numpy as np
 import pybullet
 
+from visual_adaptive_servo.overlay import draw_points
+
 NEAR = 0.05   # m, clipping planes of the rendered frustum
 FAR = 100.0   # m
-
-# marker colours (RGB) of the measured feature x, the desired x_d and the observer x_o
-COLOR_MEASURED = (230, 30, 30)
-COLOR_DESIRED = (30, 200, 30)
-COLOR_OBSERVED = (40, 90, 255)
 
 
 def view_matrices(camera, near=NEAR, far=FAR):
@@ -72,25 +69,6 @@ def render_image(client, camera, width=None, height=None, renderer=None):
     return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
 
 
-def draw_marker(rgb, col, row, color, radius=4, shape="ring"):
-    """Draw a ``ring`` or ``cross`` centred at (col, row) into ``rgb`` (h, w, 3), in place."""
-    h, w, _ = rgb.shape
-    if not (np.isfinite(col) and np.isfinite(row)):
-        return
-    rr, cc = np.mgrid[-radius:radius + 1, -radius:radius + 1]
-    if shape == "ring":
-        dist = np.hypot(rr, cc)
-        mask = np.abs(dist - radius + 0.5) <= 0.8
-    elif shape == "cross":
-        mask = (rr == 0) | (cc == 0)
-    else:
-        raise ValueError(f"marker shape: {shape!r} is not ring or cross")
-    rows = int(np.rint(row)) + rr[mask]
-    cols = int(np.rint(col)) + cc[mask]
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    rgb[rows[inside], cols[inside]] = color
-
-
 def render_camera_view(client, camera, width, height, markers=()):
     """The camera's view of the PyBullet scene, with markers drawn.
 
@@ -110,9 +88,7 @@ def render_camera_view(client, camera, width, height, markers=()):
     """
     rgb = render_image(client, camera, width, height)
     for pixels, color, shape in markers:
-        if pixels is None:
-            continue
-        cols, rows = image_coordinates(pixels, camera, width, height)
-        for col, row in zip(cols, rows):
-            draw_marker(rgb, col - 0.5, row - 0.5, color, shape=shape)
+        if pixels is not None:
+            cols, rows = image_coordinates(pixels, camera, width, height)
+            draw_points(rgb, np.column_stack([cols, rows]), color, shape)
     return rgb

@@ -75,6 +75,7 @@ from visual_adaptive_servo.config import (
     SimConfig,
     build_sim_arm,
 )
+from visual_adaptive_servo.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
 from visual_adaptive_servo.ros_params import declare_schema
 
 from . import render
@@ -239,9 +240,9 @@ class SimNode(Node):
         rgb = render.render_camera_view(
             self.sim.plant.client, self.sim.camera, cfg.params["render.width"],
             cfg.params["render.height"],
-            [(self.overlay["desired"], render.COLOR_DESIRED, "cross"),
-             (self.overlay["observed"], render.COLOR_OBSERVED, "ring"),
-             (meas.pixels, render.COLOR_MEASURED, "ring")])
+            [(self.overlay["desired"], COLOR_DESIRED, "cross"),
+             (self.overlay["observed"], COLOR_OBSERVED, "ring"),
+             (meas.pixels, COLOR_MEASURED, "ring")])
         self.image_pub.publish(m.image_to_msg(self.msgs, meas.t, rgb))
 
     def destroy_node(self):

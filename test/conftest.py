@@ -12,12 +12,15 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Shared fixtures: the reference scenario and a continuous-time closed loop.
+"""Shared fixtures: the reference scenario, a continuous-time closed loop, marker pictures.
 
 ``simulate_continuous`` integrates the paper's closed loop -- true rigid-body
 dynamics of the model, true projection, and :func:`control_law` -- with RK4,
 so the proof's Lyapunov functions and the derivative in eq (19) can be checked
 against the continuous-time theory, independently of sampling.
+
+``draw_discs`` renders anti-aliased colour markers whose exact centroids are
+known, for the feature detector's tests.
 """
 
 import os
@@ -84,3 +87,33 @@ def simulate_continuous(model, gains, trajectory, q0, qd0, state0, dt, steps, ob
         k4 = closed_loop_rates(model, gains, trajectory, t + dt, y + dt * k3)[0]
         y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         t += dt
+
+
+def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
+    """An (height, width, 3) uint8 picture of anti-aliased discs, and their true centroids.
+
+    ``discs``: (col, row, radius, (r, g, b)) per disc, centre and radius in
+    continuous image coordinates (the top-left corner of the picture is (0, 0),
+    see :mod:`visual_adaptive_servo.detection`).  Each pixel is sampled on a
+    ``supersample`` x ``supersample`` grid; its colour is the covered fraction's
+    mix of disc and what lies below, rounded to 8 bits.  The true centroid of a
+    disc is the mean of its covered sample points inside the picture (m, 2):
+    exactly the centroid of what the picture shows, up to the 8-bit rounding.
+    """
+    picture = np.empty((height, width, 3))
+    picture[:] = background
+    offsets = (np.arange(supersample) + 0.5) / supersample
+    centroids = []
+    for col, row, radius, color in discs:
+        r0, r1 = max(int(np.floor(row - radius)), 0), min(int(np.ceil(row + radius)) + 1, height)
+        c0, c1 = max(int(np.floor(col - radius)), 0), min(int(np.ceil(col + radius)) + 1, width)
+        ys = (np.arange(r0, r1)[:, None] + offsets).reshape(-1)
+        xs = (np.arange(c0, c1)[:, None] + offsets).reshape(-1)
+        inside = (xs[None, :] - col) ** 2 + (ys[:, None] - row) ** 2 <= radius ** 2
+        coverage = inside.reshape(r1 - r0, supersample, c1 - c0, supersample).mean(axis=(1, 3))
+        coverage = coverage[:, :, None]
+        picture[r0:r1, c0:c1] = (coverage * np.asarray(color, dtype=float)
+                                 + (1.0 - coverage) * picture[r0:r1, c0:c1])
+        rows, cols = np.nonzero(inside)
+        centroids.append([xs[cols].mean(), ys[rows].mean()])
+    return np.rint(picture).astype(np.uint8), np.array(centroids)

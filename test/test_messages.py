@@ -170,3 +170,89 @@ def test_rclpy_serialises_to_the_same_bytes_as_rosbags(bags):
         raw = serialize_message(ros_msg)
         assert raw == bytes(bags.typestore.serialize_cdr(bag_msg, typename)), short
         assert deserialize_message(raw, type(ros_msg)) == ros_msg, short
+
+
+def _image_msg(msgs, pixels, encoding, step=None, padding=0, is_bigendian=0):
+    """An Image of ``pixels`` (h, w, c) as stored, rows padded with ``padding`` bytes of 0xAB."""
+    h, w, c = pixels.shape
+    step = w * c + padding if step is None else step
+    rows = np.full((h, step), 0xAB, dtype=np.uint8)
+    rows[:, :w * c] = pixels.reshape(h, w * c)
+    return msgs.Image(header=m.header(msgs, 2.5, "cam"), height=h, width=w, encoding=encoding,
+                      is_bigendian=is_bigendian, step=step, data=msgs.uint8s(rows))
+
+
+@pytest.fixture()
+def picture(rng):
+    return rng.integers(0, 256, (5, 7, 3), dtype=np.uint8)
+
+
+def test_image_round_trips_through_image_to_msg(msgs, picture):
+    t, rgb = m.image_from_msg(m.image_to_msg(msgs, 1.25, picture))
+    assert t == pytest.approx(1.25)
+    np.testing.assert_array_equal(rgb, picture)
+    assert rgb.dtype == np.uint8 and rgb.flags.c_contiguous and rgb.flags.writeable
+
+
+@pytest.mark.parametrize("encoding, stored", [
+    ("rgb8", lambda p: p), ("bgr8", lambda p: p[..., ::-1]),
+    ("rgba8", lambda p: np.dstack([p, np.full(p.shape[:2], 9, np.uint8)])),
+    ("bgra8", lambda p: np.dstack([p[..., ::-1], np.full(p.shape[:2], 9, np.uint8)]))])
+@pytest.mark.parametrize("padding", [0, 5])
+def test_colour_encodings_and_padded_rows_give_rgb(msgs, picture, encoding, stored, padding):
+    msg = _image_msg(msgs, stored(picture), encoding, padding=padding)
+    t, rgb = m.image_from_msg(msg)
+    assert t == pytest.approx(2.5)
+    np.testing.assert_array_equal(rgb, picture)
+
+
+def test_is_bigendian_does_not_matter_for_8_bit_channels(msgs, picture):
+    little = m.image_from_msg(_image_msg(msgs, picture, "rgb8", is_bigendian=0))[1]
+    big = m.image_from_msg(_image_msg(msgs, picture, "rgb8", is_bigendian=1))[1]
+    np.testing.assert_array_equal(little, big)
+
+
+def test_image_never_shares_memory_with_the_message(bags, picture):
+    msg = m.image_to_msg(bags, 0.0, picture)
+    rgb = m.image_from_msg(msg)[1]
+    assert not np.shares_memory(rgb, msg.data)
+    rgb[:] = 0
+    np.testing.assert_array_equal(np.asarray(msg.data).reshape(picture.shape), picture)
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"height": 6}, r"image: 105 bytes of data, but height 6 x step 21 = 126"),
+    ({"width": 8}, r"image: step 21 is less than width 8 x 3 bytes \(rgb8\)"),
+    ({"step": 20}, r"image: step 20 is less than width 7 x 3 bytes"),
+    ({"step": 22}, r"image: 105 bytes of data, but height 5 x step 22 = 110"),
+    ({"encoding": "mono8"}, r"image: encoding 'mono8' is not supported; use one of "
+                            r"\['bgr8', 'bgra8', 'rgb8', 'rgba8'\]"),
+    ({"encoding": "16UC1"}, r"encoding '16UC1' is not supported"),
+    ({"encoding": "yuv422"}, r"encoding 'yuv422' is not supported"),
+    ({"encoding": ""}, r"encoding '' is not supported"),
+])
+def test_inconsistent_or_unsupported_images_are_refused(msgs, picture, change, match):
+    msg = m.image_to_msg(msgs, 0.0, picture)
+    for name, value in change.items():
+        setattr(msg, name, value)
+    with pytest.raises(ValueError, match=match):
+        m.image_from_msg(msg)
+
+
+def test_empty_image_converts_to_an_empty_array(bags):
+    msg = bags.Image(header=m.header(bags, 0.0), height=0, width=4, encoding="rgb8",
+                     is_bigendian=0, step=12, data=bags.uint8s([]))
+    assert m.image_from_msg(msg)[1].shape == (0, 4, 3)
+
+
+def test_features_for_an_image_carry_its_stamp_and_frame_exactly(msgs):
+    stamp = msgs.Time(sec=1_700_000_000, nanosec=123_456_789)
+    image_header = msgs.Header(stamp=stamp, frame_id="camera_optical")
+    msg = m.features_for_image(msgs, image_header, [1.5, -2.25, 3.0, 4.0])
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert msg.header.frame_id == "camera_optical"
+    np.testing.assert_array_equal(m.features_from_msg(msg)[1], [1.5, -2.25, 3.0, 4.0])
+    # why not through seconds: the float64 of this stamp is 21 ns off
+    via_float = m.time_to_stamp(msgs, m.stamp_to_time(stamp))
+    assert via_float.nanosec != 123_456_789
+    assert msg.header.stamp is not stamp

@@ -26,6 +26,7 @@ import pytest
 from sim_bridge import render
 from sim_bridge.camera import PinholeCamera
 from sim_bridge.plant import URDF_DIR, ArmPlant
+from visual_adaptive_servo import overlay
 
 WIDTH, HEIGHT = 320, 240
 
@@ -97,18 +98,18 @@ def test_render_draws_markers_in_their_colours(plant):
     x = np.array([65.0, 65.0])
     x_d = np.array([-100.0, -100.0])
     rgb = render.render_camera_view(plant.client, camera, WIDTH, HEIGHT, [
-        (x, render.COLOR_MEASURED, "ring"), (x_d, render.COLOR_DESIRED, "cross"),
-        (np.array([np.nan, np.nan]), render.COLOR_OBSERVED, "ring"), (None, (0, 0, 0), "ring")])
+        (x, overlay.COLOR_MEASURED, "ring"), (x_d, overlay.COLOR_DESIRED, "cross"),
+        (np.array([np.nan, np.nan]), overlay.COLOR_OBSERVED, "ring"), (None, (0, 0, 0), "ring")])
     assert rgb.shape == (HEIGHT, WIDTH, 3) and rgb.dtype == np.uint8
     cols, rows = render.image_coordinates(x_d, camera, WIDTH, HEIGHT)
-    assert tuple(rgb[int(rows[0]), int(cols[0])]) == render.COLOR_DESIRED
+    assert tuple(rgb[int(rows[0]), int(cols[0])]) == overlay.COLOR_DESIRED
     cols, rows = render.image_coordinates(x, camera, WIDTH, HEIGHT)
     r, c = int(rows[0]), int(cols[0])
     ring = rgb[r - 5:r + 6, c - 5:c + 6].reshape(-1, 3)
-    assert any(tuple(p) == render.COLOR_MEASURED for p in ring)
-    assert not np.any(np.all(rgb == render.COLOR_OBSERVED, axis=2))
+    assert any(tuple(p) == overlay.COLOR_MEASURED for p in ring)
+    assert not np.any(np.all(rgb == overlay.COLOR_OBSERVED, axis=2))
 
 
 def test_unknown_marker_shape_is_refused():
     with pytest.raises(ValueError, match="marker shape"):
-        render.draw_marker(np.zeros((10, 10, 3), np.uint8), 5, 5, (1, 2, 3), shape="star")
+        overlay.draw_marker(np.zeros((10, 10, 3), np.uint8), 5, 5, (1, 2, 3), shape="star")

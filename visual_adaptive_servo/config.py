@@ -21,7 +21,9 @@ ROS 2 flattens them.  The same schema (:data:`SIM_PARAMS`,
 :data:`CONTROLLER_PARAMS`) drives the ROS nodes' parameter declarations and
 ``vas run``, and :meth:`SimConfig.from_params` / :meth:`ControllerConfig.from_params`
 validate a complete parameter set at once: an invalid value is refused with the
-parameter name and the rule it breaks, and nothing is partially applied.
+parameter name and the rule it breaks, and nothing is partially applied.  The
+feature detector's schema, :data:`DETECTOR_PARAMS`, is validated the same way
+by :meth:`detection.DetectorConfig.from_params`.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from .trajectory import TRAJECTORY_TYPES, SinusoidTrajectory, TabulatedTrajector
 
 SIM_SECTION = "sim_node"
 CONTROLLER_SECTION = "controller_node"
+DETECTOR_SECTION = "feature_detector"
 TIMING_MODES = ("lockstep", "realtime")
 STRUCTURE_NAMES = ("model", "urdf", "base_link", "tip_link", "feature_points", "unknown_lengths")
 FALLBACKS = ("gravity_compensation", "zero_torque")
@@ -302,6 +305,33 @@ CONTROLLER_PARAMS = (
               True),
     ParamSpec("divergence_torque", 1e5, "float",
               "|tau| above this (before saturation) is reported as divergence [N m].", 0.0, None),
+)
+
+DETECTOR_PARAMS = (
+    ParamSpec("markers.colors", list(MARKER_COLORS[:3]), "float_list",
+              "Marker colours as the camera sees them, RGB 0-255, three values per marker "
+              "(1 to 3 markers), in feature order (default: the simulator's first marker).",
+              0.0, 255.0, True),
+    ParamSpec("markers.tolerance", 40.0, "float",
+              "A pixel belongs to a marker when each of its R, G, B is within this of the "
+              "marker's colour.", 0.0, 255.0, True),
+    ParamSpec("blob_area", [10.0, 50000.0], "float_list",
+              "[min, max] area of a marker blob [px]; blobs outside are not markers.",
+              1.0, None, True),
+    ParamSpec("pixel_origin", [320.0, 240.0], "float_list",
+              "Image point (column, row) [px] that is pixel (0, 0) of the controller; "
+              "continuous image coordinates, the top-left corner of the image is (0, 0). "
+              "The default is the paper's camera (origin on the optical axis) for 640x480."),
+    ParamSpec("pixel_axes", [-1.0, -1.0], "float_list",
+              "+1 or -1 per axis: u = axes[0] (column - origin[0]), v = axes[1] (row - "
+              "origin[1]); [1, 1] for a standard camera, [-1, -1] for the paper's (u to the "
+              "left, v up)."),
+    ParamSpec("overlay.enabled", True, "bool",
+              "Publish ~/overlay: the image with x, x_d and x_o drawn (for image viewers)."),
+    ParamSpec("timing_mode", "lockstep", "str",
+              "QoS of the image subscription and the features publisher; must match the "
+              "camera's and the controller's (lockstep: reliable; realtime: best-effort "
+              "sensor data)."),
 )
 
 
