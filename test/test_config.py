@@ -118,3 +118,13 @@ def test_configs_are_immutable(scenario):
         scenario.controller.K[0] = 5.0
     assert isinstance(scenario.sim, SimConfig)
     assert isinstance(scenario.controller, ControllerConfig)
+
+
+def test_package_paths_resolve_without_a_sourced_ros(monkeypatch):
+    from visual_adaptive_servo.resources import resolve_path
+
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    path = resolve_path("package://visual_adaptive_servo/urdf/paper_rrr.urdf")
+    assert path.endswith("sim_bridge/urdf/paper_rrr.urdf")
+    with pytest.raises(FileNotFoundError, match=r"sim_node\.urdf: 'package://nope/x.urdf' not found"):
+        resolve_path("package://nope/x.urdf", what="sim_node.urdf")

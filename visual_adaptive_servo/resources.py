@@ -75,7 +75,8 @@ def _package_candidates(package, rest):
     else:
         try:
             candidates.append(os.path.join(get_package_share_directory(package), rest))
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError, ValueError):
+            # not installed there, or no ament prefix path set (ROS importable, not sourced)
             pass
     if package == PACKAGE:
         folder, _, inner = rest.partition("/")
