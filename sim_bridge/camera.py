@@ -222,12 +222,17 @@ class PinholeCamera:
 
 @dataclass(frozen=True)
 class CameraFrame:
-    """One camera measurement: capture time, pixels (2m,) and true depths (m,)."""
+    """One camera frame: capture time, pixels (2m,, noisy), true depths (m,) and pixels.
+
+    ``image`` (h, w, 3) uint8 is the rendered picture when the camera renders.
+    """
 
     stamp: float
     pixels: np.ndarray
     depth: np.ndarray
     visible: bool
+    true_pixels: np.ndarray = None
+    image: np.ndarray = None
 
 
 class FeatureCamera:
@@ -251,15 +256,18 @@ class FeatureCamera:
         self.captured = 0
         self.published = 0
 
-    def step(self, t, pixels, depth):
+    def step(self, t, pixels, depth, render=None):
         """Capture a frame at ``t`` if one is due, return the frame published at ``t`` (or None).
 
-        ``pixels`` (2m,) and ``depth`` (m,) are the exact projection at t.
+        ``pixels`` (2m,) and ``depth`` (m,) are the exact projection at t; ``render``, if
+        given, is called at a capture to produce the frame's picture.
         """
         if t >= self.captured * self.period - 1e-9:
+            noisy = pixels
             if self.noise > 0.0:
-                pixels = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
-            self.pending.append(CameraFrame(t, pixels, depth, min(depth.tolist()) > 0.0))
+                noisy = pixels + self.rng.normal(0.0, self.noise, pixels.shape)
+            self.pending.append(CameraFrame(t, noisy, depth, min(depth.tolist()) > 0.0, pixels,
+                                            None if render is None else render()))
             self.captured += 1
         if self.pending and self.pending[0].stamp + self.latency <= t + 1e-9:
             self.published += 1

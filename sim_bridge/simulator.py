@@ -29,8 +29,11 @@ from math import isfinite
 
 import numpy as np
 
+import pybullet
+
 from visual_adaptive_servo.models import GRAVITY
 
+from . import render
 from .camera import FeatureCamera
 from .plant import ArmPlant
 
@@ -48,6 +51,46 @@ class Measurement:
     true_depth: np.ndarray           # (m,) depth at time t (ground truth, plots only)
     true_pixels: np.ndarray          # (2m,) noiseless pixels at time t
     problems: tuple = ()
+    image: np.ndarray | None = None  # rendered picture of the frame published now (rendered)
+    frame_true_pixels: np.ndarray | None = None   # noiseless pixels at the frame's capture
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Injected faults, each a window [start, length] in seconds of simulated time.
+
+    ``nan_pixels``: frames captured in the window carry NaN pixels; ``nan_joint_states``:
+    joint positions read NaN; ``dropout``: frames captured in the window are not
+    published; ``occlusion``: like dropout in points mode, a real occluder in front of
+    point 1 when rendered (the detector then misses it); ``drop_every``: every k-th
+    frame is not published (0: none).  For robustness tests and campaigns: every case
+    is then a plain parameter set, reproducible with ``vas run --set``.
+    """
+
+    windows: dict
+    drop_every: int = 0
+    rendered: bool = False
+
+    NAMES = ("nan_pixels", "nan_joint_states", "dropout", "occlusion")
+
+    @classmethod
+    def from_config(cls, config):
+        windows = {}
+        for name in cls.NAMES:
+            window = list(config[f"faults.{name}"])
+            windows[name] = tuple(window) if window[1] > 0.0 else None
+        return cls(windows, int(config["faults.drop_every"]), config.camera_mode == "rendered")
+
+    def active(self, name, t):
+        window = self.windows[name]
+        return window is not None and window[0] - 1e-9 <= t < window[0] + window[1] - 1e-9
+
+    def drops(self, stamp, published):
+        """Whether the frame captured at ``stamp`` (the ``published``-th) is suppressed."""
+        if self.active("dropout", stamp) or (not self.rendered
+                                             and self.active("occlusion", stamp)):
+            return True
+        return self.drop_every > 0 and published % self.drop_every == 0
 
 
 class Simulator:
@@ -65,6 +108,20 @@ class Simulator:
         self.plant = ArmPlant(arm.chain.urdf, config.physics_dt, GRAVITY, arm.chain.tip_link,
                               arm.chain.joint_names, arm.offsets)
         self.camera = config.camera
+        # the markers are in the scene always (they show in any rendered view); in
+        # rendered mode the camera's frames are pictures and the pixels come from a detector
+        self.plant.add_markers(config["markers.radius"], np.reshape(config["markers.colors"],
+                                                                    (-1, 3)))
+        self.rendered = config.camera_mode == "rendered"
+        self.faults = Faults.from_config(config)
+        self._occluder = None
+        if self.rendered and self.faults.windows["occlusion"] is not None:
+            shape = pybullet.createVisualShape(
+                pybullet.GEOM_SPHERE, radius=3.0 * config["markers.radius"],
+                rgbaColor=(0.35, 0.35, 0.38, 1.0), physicsClientId=self.plant.client)
+            self._occluder = pybullet.createMultiBody(
+                baseMass=0.0, baseVisualShapeIndex=shape, baseCollisionShapeIndex=-1,
+                basePosition=(0.0, 0.0, -1e3), physicsClientId=self.plant.client)
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
                                             config.camera_rate, config.camera_latency, config.seed)
         self.plant.reset(config.initial_positions, config.initial_velocities)
@@ -79,21 +136,56 @@ class Simulator:
         return self.step_index * self._period
 
     def measure(self):
-        """Sensors now: the joint state, and the camera frame published now (if any)."""
+        """Sensors now: the joint state, and the camera frame published now (if any).
+
+        The ``faults.*`` windows apply here (see :class:`Faults`).
+        """
         q, qd = self.plant.joint_state()
         t = self.t
         true_pixels, true_depth = self.camera.project(self.plant.feature_positions())
-        frame = self.feature_camera.step(t, true_pixels, true_depth)
+        self._place_occluder(t)
+        frame = self.feature_camera.step(t, true_pixels, true_depth,
+                                         self._render if self.rendered else None)
         problems = []
-        pixels, stamp = None, None
+        pixels, stamp, image, frame_truth = None, None, None, None
+        measured_q = q
+        if self.faults.active("nan_joint_states", t):
+            measured_q = np.full_like(q, np.nan)
+        if frame is not None and self.faults.drops(frame.stamp, self.feature_camera.published):
+            frame = None
         if frame is not None:
-            if frame.visible:
-                pixels, stamp = frame.pixels, frame.stamp
+            stamp, frame_truth = frame.stamp, frame.true_pixels
+            if self.rendered:
+                image = frame.image
+            elif frame.visible:
+                pixels = frame.pixels
             else:
+                stamp = None
                 problems.append(f"feature behind the camera at t={frame.stamp:.3f} "
                                 f"(depth {frame.depth.tolist()})")
-        return Measurement(t, q, qd, self.tau.copy(), stamp, pixels, true_depth,
-                           true_pixels, tuple(problems))
+            if pixels is not None and self.faults.active("nan_pixels", frame.stamp):
+                pixels = np.full_like(pixels, np.nan)
+        return Measurement(t, measured_q, qd, self.tau.copy(), stamp, pixels, true_depth,
+                           true_pixels, tuple(problems), image, frame_truth)
+
+    def _place_occluder(self, t):
+        """In rendered mode, an occlusion window puts an opaque ball in front of point 1."""
+        if self._occluder is None:
+            return
+        inside = self.faults.active("occlusion", t)
+        if inside:
+            point = self.plant.feature_positions()[0]
+            where = point + 0.3 * (np.asarray(self.camera.position) - point)
+        else:
+            where = np.array([0.0, 0.0, -1e3])
+        pybullet.resetBasePositionAndOrientation(self._occluder, where.tolist(),
+                                                 (0.0, 0.0, 0.0, 1.0),
+                                                 physicsClientId=self.plant.client)
+
+    def _render(self):
+        """The camera's picture now: markers placed, flat light (colours exactly as set)."""
+        self.plant.place_markers()
+        return render.render_image(self.plant.client, self.camera, flat=True)
 
     def apply(self, tau):
         """Hold ``tau`` for one control period; returns a reason if it was refused."""

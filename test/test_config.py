@@ -126,5 +126,6 @@ def test_package_paths_resolve_without_a_sourced_ros(monkeypatch):
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
     path = resolve_path("package://visual_adaptive_servo/urdf/paper_rrr.urdf")
     assert path.endswith("sim_bridge/urdf/paper_rrr.urdf")
-    with pytest.raises(FileNotFoundError, match=r"sim_node\.urdf: 'package://nope/x.urdf' not found"):
+    with pytest.raises(FileNotFoundError,
+                       match=r"sim_node\.urdf: 'package://nope/x.urdf' not found"):
         resolve_path("package://nope/x.urdf", what="sim_node.urdf")

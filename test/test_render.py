@@ -113,3 +113,38 @@ def test_render_draws_markers_in_their_colours(plant):
 def test_unknown_marker_shape_is_refused():
     with pytest.raises(ValueError, match="marker shape"):
         overlay.draw_marker(np.zeros((10, 10, 3), np.uint8), 5, 5, (1, 2, 3), shape="star")
+
+
+def test_rendered_marker_centroid_lands_on_its_projection():
+    """A lone marker ball, flat-lit, anywhere in view: detected where the camera projects it.
+
+    Pins the half-pixel shift of PyBullet's TinyRenderer (render.RENDER_PIXEL_SHIFT): without
+    it the mean error is (+0.5, -0.5) raw pixels.
+    """
+    from visual_adaptive_servo.detection import DetectorConfig, detect
+
+    client = pybullet.connect(pybullet.DIRECT)
+    try:
+        shape = pybullet.createVisualShape(pybullet.GEOM_SPHERE, radius=0.2,
+                                           rgbaColor=(230 / 255, 30 / 255, 30 / 255, 1.0),
+                                           physicsClientId=client)
+        body = pybullet.createMultiBody(baseMass=0.0, baseVisualShapeIndex=shape,
+                                        baseCollisionShapeIndex=-1, physicsClientId=client)
+        camera = PinholeCamera.paper()
+        config = DetectorConfig.from_params({"markers.colors": [230.0, 30.0, 30.0],
+                                             "pixel_origin": [320.0, 240.0],
+                                             "pixel_axes": [-1.0, -1.0]})
+        rng = np.random.default_rng(3)
+        errors = []
+        for _ in range(30):
+            point = rng.uniform([-0.5, -1.5, -0.5], [1.5, 1.5, 2.5])
+            pybullet.resetBasePositionAndOrientation(body, point.tolist(), (0, 0, 0, 1),
+                                                     physicsClientId=client)
+            found = detect(render.render_image(client, camera, flat=True), config)
+            assert found.pixels is not None, found.reason
+            errors.append(found.pixels - camera.project(point[None, :])[0])
+        errors = np.array(errors)
+        assert np.all(np.abs(errors.mean(axis=0)) < 0.05), errors.mean(axis=0)
+        assert np.sqrt(np.mean(np.sum(errors**2, axis=1))) < 0.2
+    finally:
+        pybullet.disconnect(client)

@@ -50,6 +50,7 @@ DETECTOR_SECTION = "feature_detector"
 TIMING_MODES = ("lockstep", "realtime")
 STRUCTURE_NAMES = ("model", "urdf", "base_link", "tip_link", "feature_points", "unknown_lengths")
 FALLBACKS = ("gravity_compensation", "zero_torque")
+CAMERA_MODES = ("points", "rendered")
 
 
 class ConfigError(ValueError):
@@ -149,7 +150,12 @@ SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "
               "Joint velocities at start [rad/s or m/s]."),
     ParamSpec("joint_names", lambda s, v: list(s.joint_names), "str_list",
               "Joint names in /joint_states and the command order (default: the URDF chain's)."),
-    ParamSpec("pixel_noise_std", 0.0, "float", "Gaussian pixel noise std [px].", 0.0, 100.0),
+    ParamSpec("camera_mode", "points", "str",
+              "points: the camera reports the projected feature points (plus pixel_noise_std); "
+              "rendered: it renders pictures (/camera/image_raw) and a feature detector finds "
+              "the markers in them."),
+    ParamSpec("pixel_noise_std", 0.0, "float", "Gaussian pixel noise std [px] (points mode).",
+              0.0, 100.0),
     ParamSpec("camera_rate", 0.0, "float",
               "Camera frames per second; 0 = one frame per control_period [Hz].", 0.0, None),
     ParamSpec("camera_latency", 0.0, "float",
@@ -161,6 +167,20 @@ SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "
               "Radius of the coloured sphere drawn at each feature point [m].", 1e-4, 1.0),
     ParamSpec("markers.colors", lambda s, v: list(MARKER_COLORS[:3 * s.m]), "float_list",
               "RGB 0-255 of each feature point's marker, 3 numbers per point.", 0.0, 255.0),
+    ParamSpec("faults.nan_pixels", [0.0, 0.0], "float_list",
+              "Fault injection: frames captured in [start, start + length] carry NaN pixels "
+              "[s, s]; length 0 = off.", 0.0, None),
+    ParamSpec("faults.nan_joint_states", [0.0, 0.0], "float_list",
+              "Fault injection: joint positions read NaN in [start, start + length] [s, s].",
+              0.0, None),
+    ParamSpec("faults.dropout", [0.0, 0.0], "float_list",
+              "Fault injection: frames captured in [start, start + length] are lost [s, s].",
+              0.0, None),
+    ParamSpec("faults.occlusion", [0.0, 0.0], "float_list",
+              "Fault injection: point 1 hidden in [start, start + length] [s, s] (rendered: an "
+              "occluder in front of it; points: its frames are lost).", 0.0, None),
+    ParamSpec("faults.drop_every", 0, "int",
+              "Fault injection: every k-th frame is lost; 0 = none.", 0, None),
     ParamSpec("timing_mode", "lockstep", "str",
               "lockstep: wait for the command answering each state; realtime: wall-clock timer."),
     ParamSpec("command_timeout", 1.0, "float",
@@ -494,6 +514,9 @@ class SimConfig(_ValidatedParams):
         for name in ("initial_positions", "initial_velocities"):
             _require_finite(v, name, section)
         _require_length(v, "markers.colors", 3 * arm.m, section)
+        for name in ("faults.nan_pixels", "faults.nan_joint_states", "faults.dropout",
+                     "faults.occlusion"):
+            _require_length(v, name, 2, section)
         ratio = v["control_period"] / v["physics_dt"]
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
             raise ConfigError(f"{section}.control_period: must be a whole multiple of "
@@ -501,6 +524,9 @@ class SimConfig(_ValidatedParams):
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
                               f"got {v['timing_mode']!r}")
+        if v["camera_mode"] not in CAMERA_MODES:
+            raise ConfigError(f"{section}.camera_mode: must be one of {CAMERA_MODES}, "
+                              f"got {v['camera_mode']!r}")
         if v["camera_rate"] * v["control_period"] > 1.0 + 1e-9:
             raise ConfigError(f"{section}.camera_rate: at most one frame per control period "
                               f"({1.0 / v['control_period']:g} Hz), got {v['camera_rate']}")
@@ -672,7 +698,11 @@ def _coerce_numbers(value):
 
 
 def read_param_file(path):
-    """Read a ROS 2 parameter YAML into {section: flat params}."""
+    """Read a ROS 2 parameter YAML into {section: flat params}.
+
+    ``sim_node`` and ``controller_node`` are required; a ``feature_detector``
+    section (the detector of ``camera_mode: rendered``) is read when present.
+    """
     with open(path, encoding="utf-8") as handle:
         try:
             data = yaml.safe_load(handle)
@@ -681,8 +711,10 @@ def read_param_file(path):
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: must be a mapping with sim_node and controller_node")
     sections = {}
-    for section in (SIM_SECTION, CONTROLLER_SECTION):
+    for section in (SIM_SECTION, CONTROLLER_SECTION, DETECTOR_SECTION):
         body = data.get(section) or data.get("/" + section)
+        if body is None and section == DETECTOR_SECTION:
+            continue
         if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
             raise ConfigError(f"{path}: needs a '{section}: ros__parameters:' mapping")
         sections[section] = {k: _coerce_numbers(v)
@@ -696,9 +728,11 @@ def apply_overrides(sections, overrides):
     for item in overrides:
         key, sep, text = item.partition("=")
         section, dot, name = key.partition(".")
+        if section == DETECTOR_SECTION:
+            result.setdefault(section, {})
         if not sep or not dot or section not in result:
-            raise ConfigError(f"--set {item!r}: expected sim_node.NAME=VALUE or "
-                              f"controller_node.NAME=VALUE")
+            raise ConfigError(f"--set {item!r}: expected sim_node.NAME=VALUE, "
+                              f"controller_node.NAME=VALUE or feature_detector.NAME=VALUE")
         try:
             result[section][name] = _coerce_numbers(yaml.safe_load(text))
         except yaml.YAMLError as exc:
@@ -712,6 +746,21 @@ class Scenario:
 
     sim: SimConfig
     controller: ControllerConfig
+    detector: object = None     # detection.DetectorConfig when the camera renders
+
+
+def detector_for(sim, params=None):
+    """The feature detector matching the simulated camera: its marker colours and pixel map.
+
+    ``params`` (a ``feature_detector`` section) may change anything, e.g. the tolerance.
+    """
+    from .detection import DetectorConfig
+
+    base = {"markers.colors": [float(v) for v in sim["markers.colors"]],
+            "pixel_origin": [float(v) for v in sim.camera.pixel_origin],
+            "pixel_axes": [float(v) for v in sim.camera.pixel_axes]}
+    base.update(params or {})
+    return DetectorConfig.from_params(base)
 
 
 def load_scenario(path, overrides=(), edit: Callable[[dict], None] | None = None):
@@ -742,7 +791,9 @@ def load_scenario(path, overrides=(), edit: Callable[[dict], None] | None = None
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     check_start(sim, ctrl)
-    return Scenario(sim, ctrl)
+    detector = (detector_for(sim, sections.get(DETECTOR_SECTION))
+                if sim.camera_mode == "rendered" else None)
+    return Scenario(sim, ctrl, detector)
 
 
 def check_start(sim, ctrl):

@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -140,6 +141,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     diverged, reason, interrupted, error = False, "", False, None
     recorder = McapRecorder(os.path.join(out_dir, "run.mcap")) if record else None
     msgs = recorder.msgs if recorder else None
+    detections = FrameDetections(scenario.detector)
     bar = Progress(steps, progress)
     limit = scenario.controller["divergence_torque"]
     diag_every = max(1, int(round(1.0 / period)))
@@ -149,6 +151,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         for k in range(steps):
             truth = sim.measure()
             meas = truth if faults is None else faults(k, truth)
+            if meas.image is not None:
+                meas = detections.detect(meas)
             res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
             counters["rejected"] += res.status != "ok"
             counters["fallback"] += res.status == "fallback"
@@ -196,12 +200,52 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             recorder.close()
     data = series.view()
     counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
+    counters.update(detections.figures())
     summary = summarize(data, series.status, wall, diverged, reason, counters)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
                    outputs=["summary.json", "timeseries.csv"])
     write_outputs(out_dir, data, series.status, model, summary, record, plots)
     return summary
+
+
+class FrameDetections:
+    """The feature detector between the rendered camera and the controller (rendered mode).
+
+    ``detect`` replaces a measurement's picture by the detected pixels (None, with the
+    frame's stamp dropped, when a marker is missing or ambiguous -- as the
+    feature_detector node publishes nothing then) and keeps the detection error
+    against the true projection at the frame's capture.
+    """
+
+    def __init__(self, config):
+        self.config = config
+        self.errors = []
+        self.without_features = 0
+        self.reasons = {}
+
+    def detect(self, meas):
+        from .detection import detect
+
+        found = detect(meas.image, self.config)
+        if found.pixels is None:
+            self.without_features += 1
+            kind = found.reason.split(":")[0]
+            self.reasons[kind] = self.reasons.get(kind, 0) + 1
+            return replace(meas, pixels=None, feature_stamp=None)
+        err = (found.pixels - meas.frame_true_pixels).reshape(-1, 2)
+        self.errors.append(np.linalg.norm(err, axis=1).max())
+        return replace(meas, pixels=found.pixels)
+
+    def figures(self):
+        if self.config is None:
+            return {}
+        errors = np.array(self.errors)
+        return {"detection_rms_px": float(np.sqrt(np.mean(errors ** 2))) if len(errors)
+                else math.nan,
+                "detection_max_px": float(errors.max()) if len(errors) else math.nan,
+                "frames_without_features": self.without_features,
+                "frames_without_features_by_reason": self.reasons}
 
 
 def camera_figures(frames, feature_camera):
