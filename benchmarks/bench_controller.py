@@ -18,20 +18,25 @@ What it measures: the wall time of one full :meth:`AdaptiveVisualTracker.step`
 (input validation, Euler update, projection, the control law, saturation) and
 of the bare :func:`control_law`, for the paper's RRR arm (n = 3, m = 1).
 
-How: the reference scenario (config/paper_3dof.yaml) is simulated once in
-closed loop and its measurements (t, q, q_dot, x) are stored.  A fresh tracker
+How: the scenario (default config/paper_3dof.yaml) is simulated once in
+closed loop and its measurements (t, q, q_dot, x, the frame's capture stamp)
+are stored.  A fresh tracker
 then replays them; because the controller is deterministic it goes through
 exactly the states of the closed loop.  The first replay is a warm-up and is
 not timed; every sample of the following replays is timed on its own with
 ``time.perf_counter_ns``.  ``control_law`` is timed on the (state, inputs)
 pairs the tracker saw.  The garbage collector stays enabled: its pauses are
-part of what a real control loop sees in p99.
+part of what a real control loop sees in p99.  With a camera slower than the
+joint loop (``--set sim_node.camera_rate=30``) the samples are also timed by
+kind: with a frame (applied at its capture time, the prediction re-run when it
+is late) and between frames (prediction only).
 
 Usage::
 
     python benchmarks/bench_controller.py [--config FILE] [--steps N] [--repeats R]
+        [--set NODE.PARAM=VALUE ...] [--out FILE]
 
-Prints a markdown table and writes benchmarks/results/controller_step.json.
+Prints a markdown table and writes benchmarks/results/controller_step_<config>.json.
 """
 
 from __future__ import annotations
@@ -50,40 +55,46 @@ from visual_adaptive_servo.controller import AdaptiveVisualTracker, control_law
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")
-RESULTS = os.path.join(HERE, "results", "controller_step.json")
+RESULTS = os.path.join(HERE, "results", "controller_step_{name}.json")
 
 
 def record_measurements(scenario, steps):
-    """Closed-loop run of ``steps`` samples; returns the list of (t, q, qd, x)."""
+    """Closed-loop run of ``steps`` samples; returns the list of (t, q, qd, x, x_stamp)."""
     sim = Simulator(scenario.sim)
     ctl = AdaptiveVisualTracker(scenario.controller)
     samples = []
     try:
         for _ in range(steps):
             meas = sim.measure()
-            samples.append((meas.t, meas.q, meas.qd, meas.pixels))
-            sim.apply(ctl.step(meas.t, meas.q, meas.qd, meas.pixels).tau)
+            sample = (meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
+            samples.append(sample)
+            sim.apply(ctl.step(*sample).tau)
     finally:
         sim.close()
     return samples
 
 
 def time_steps(scenario, samples, repeats):
-    """Per-sample ns of ``step`` over ``repeats`` timed replays after one warm-up replay."""
+    """Per-sample ns of ``step`` over ``repeats`` timed replays after one warm-up replay.
+
+    Returns (all timings, timings of samples with a frame, of samples without one, the
+    law's inputs).
+    """
     clock = time.perf_counter_ns
-    timings = []
+    timings, with_frame, between = [], [], []
     law_inputs = []
     for rep in range(repeats + 1):
         ctl = AdaptiveVisualTracker(scenario.controller)
-        for t, q, qd, x in samples:
+        for t, q, qd, x, stamp in samples:
             t0 = clock()
-            res = ctl.step(t, q, qd, x)
+            res = ctl.step(t, q, qd, x, stamp)
             t1 = clock()
             if rep > 0:
                 timings.append(t1 - t0)
-            elif res.status == "ok":
+                (with_frame if x is not None else between).append(t1 - t0)
+            elif res.status == "ok" and x is not None:
                 law_inputs.append((res.state, q, qd, x, ctl.desired(t)))
-    return np.array(timings), law_inputs
+    return np.array(timings), np.array(with_frame), np.array(between), law_inputs
 
 
 def time_law(ctl, law_inputs, repeats):
@@ -103,6 +114,8 @@ def time_law(ctl, law_inputs, repeats):
 
 
 def stats(ns):
+    if ns.size == 0:
+        return None
     us = ns / 1e3
     return {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)),
             "mean_us": float(np.mean(us)), "min_us": float(np.min(us)), "samples": int(us.size)}
@@ -113,29 +126,42 @@ def main(argv=None):
     parser.add_argument("--config", default=DEFAULT_CONFIG)
     parser.add_argument("--steps", type=int, default=4000, help="closed-loop samples (5 ms)")
     parser.add_argument("--repeats", type=int, default=3, help="timed replays")
-    parser.add_argument("--out", default=RESULTS, help="JSON result file")
+    parser.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE",
+                        help="parameter override, as vas run --set (repeatable)")
+    parser.add_argument("--out", help="JSON result file (default: results/"
+                        "controller_step_<config name>.json)")
     args = parser.parse_args(argv)
 
-    scenario = load_scenario(args.config)
+    scenario = load_scenario(args.config, args.set)
     samples = record_measurements(scenario, args.steps)
-    step_ns, law_inputs = time_steps(scenario, samples, args.repeats)
+    step_ns, frame_ns, between_ns, law_inputs = time_steps(scenario, samples, args.repeats)
     law_ns = time_law(AdaptiveVisualTracker(scenario.controller), law_inputs, args.repeats)
     model = scenario.controller.model
     result = {
         "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
-        "n": model.n, "m": model.m, "steps": args.steps, "repeats": args.repeats,
-        "step": stats(step_ns), "control_law": stats(law_ns),
+        "overrides": args.set, "n": model.n, "m": model.m,
+        "parameters": {"p_perp": model.p_perp, "p_z": model.p_z, "p_d": model.p_d},
+        "steps": args.steps, "repeats": args.repeats,
+        "step": stats(step_ns), "step_with_frame": stats(frame_ns),
+        "step_between_frames": stats(between_ns), "control_law": stats(law_ns),
         **environment(),
     }
-    print(f"controller latency, n={model.n}, m={model.m}, {args.steps} samples x "
-          f"{args.repeats} replays (numpy {np.__version__}, Python {platform.python_version()})\n")
+    print(f"controller latency, n={model.n}, m={model.m} (p = {model.p_perp} + {model.p_z} + "
+          f"{model.p_d}), {args.steps} samples x {args.repeats} replays "
+          f"(numpy {np.__version__}, Python {platform.python_version()})\n")
     print("| call | median [µs] | p99 [µs] | mean [µs] | min [µs] |")
     print("|---|---:|---:|---:|---:|")
-    for name, key in (("AdaptiveVisualTracker.step", "step"), ("control_law", "control_law")):
+    for name, key in (("AdaptiveVisualTracker.step", "step"),
+                      ("step, sample with a camera frame", "step_with_frame"),
+                      ("step, sample between frames (prediction only)", "step_between_frames"),
+                      ("control_law", "control_law")):
         s = result[key]
-        print(f"| `{name}` | {s['median_us']:.1f} | {s['p99_us']:.1f} | {s['mean_us']:.1f} | "
-              f"{s['min_us']:.1f} |")
-    write_result(args.out, result)
+        if s is not None:
+            print(f"| {name} | {s['median_us']:.1f} | {s['p99_us']:.1f} | {s['mean_us']:.1f} | "
+                  f"{s['min_us']:.1f} |")
+    name = os.path.splitext(os.path.basename(args.config))[0]
+    write_result(args.out or RESULTS.format(name=name + ("_" + "_".join(
+        o.split(".")[-1].replace("=", "") for o in args.set) if args.set else "")), result)
 
 
 if __name__ == "__main__":

@@ -98,6 +98,9 @@ class LawOutput:
     sigma_min: float         # smallest singular value of J_star
     damped: bool             # the pseudo-inverse was damped
     projection_active: bool  # a projection changed an adaptation rate
+    # (J_perp_hat q_dot, Z_hat_dot, Z_hat) per image coordinate: the rate of the frame
+    # prediction (prediction.py), which the observer's model term shares
+    model_rate: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -225,7 +228,8 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     # eq (10): the observer, x_o_dot = x_obs_model - alpha Delta x_o with
     # x_obs_model = Z^-1 (J_hat(q, x) q_dot - 1/2 Z_dot (x_o - x_d)), where
     # J_hat(q, x) q_dot = J_perp q_dot - X hat{Z_dot} since J_z_hat q_dot = hat{Z_dot}
-    x_obs_model = (J_perp.dot(qd) - Zh_rate * x_mid) / Zh
+    jq = J_perp.dot(qd)
+    x_obs_model = (jq - Zh_rate * x_mid) / Zh
     x_obs_dot = x_obs_model - gains.alpha * dx_obs
     x_r_dot = xd_dot - gains.gamma * e_obs
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
@@ -246,7 +250,8 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     u_dot = 0.5 * (x_obs_dot + xd_dot)
     return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
                            (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
-                           (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value)
+                           (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value,
+                           (jq, Zh_rate, Zh))
 
 
 def estimated_kinematics(tensors, qd, state):
@@ -266,7 +271,7 @@ def estimated_kinematics(tensors, qd, state):
 
 
 def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, references,
-                    image_rates, projection, min_singular_value):
+                    image_rates, projection, min_singular_value, model_rate=None):
     """Eqs (18)-(23) from the image-space references: the second half of :func:`control_law`.
 
     Shared with the velocity-based baseline, which feeds it measured instead of
@@ -286,6 +291,8 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
         acceleration, (2m,) each.
     image_rates : (x_obs_dot, a_perp_dot, a_z_dot)
         Observer rate (passed through) and the unprojected rates of eqs (24), (25).
+    model_rate : tuple, optional
+        Passed through to :attr:`LawOutput.model_rate`.
 
     Returns
     -------
@@ -333,7 +340,7 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
         projection_active = projection_active or active_d
     rates = EstimatorState(x_obs_dot, a_perp_dot, a_z_dot, a_d_dot)
     return LawOutput(tau, rates, s, qr_dot, qr_ddot, J_star, Zh[::2], sigma_min, damped,
-                     projection_active)
+                     projection_active, model_rate)
 
 
 def _damped_gram_inverse(G, min_singular_value):
@@ -463,6 +470,7 @@ class AdaptiveVisualTracker:
         self._rejecting = ()        # kinds of problem of the current rejection streak
         self.damping = None
         self.gains = replace(self.gains, D=None)
+        self._model_rate = None
         self.predictor.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
@@ -586,9 +594,9 @@ class AdaptiveVisualTracker:
             if frame is not None:
                 self._count_frame(t, stamp)
             result = self._sample(t, q, qd, x_hat, tensors, frame is not None)
-            state = result.state if result.status == "ok" else self.state
-            self.predictor.commit(t, x_hat, self._prediction_rate(tensors, qd, state),
-                                  stamp if frame is not None else None)
+            rate = (self._model_rate if result.status == "ok" and self._model_rate is not None
+                    else self._prediction_rate(tensors, qd, self.state))
+            self.predictor.commit(t, x_hat, rate, stamp if frame is not None else None)
             if problems and result.status == "ok":
                 result = replace(result, problems=tuple(problems))
             return result
@@ -639,6 +647,7 @@ class AdaptiveVisualTracker:
         limit = self.config["torque_limit"]
         saturated = not all(-lim <= v <= lim for v, lim in zip(out.tau.tolist(), limit.tolist()))
         tau = np.clip(out.tau, -limit, limit) if saturated else out.tau
+        self._model_rate = out.model_rate
         # commit
         if restarting and self.stale:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)

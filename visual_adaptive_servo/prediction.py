@@ -128,6 +128,8 @@ class FramePredictor:
         """
         x_frame = np.asarray(x_frame, dtype=float)
         if stamp >= t - TIME_EPS:
+            if self.gain >= 1.0 and self.drift_gain == 0.0:
+                return x_frame.copy()         # a frame of now resets: nothing to predict
             prior = self.predict(t)
             self._learn_drift(prior, x_frame, stamp)
             return self._blend(prior, x_frame)
