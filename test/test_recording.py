@@ -341,11 +341,11 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_a_valid_file_of_the_chunks_befor
     path = tmp_path / "run.mcap"
     recorder = McapRecorder(path, scenario.sim.joint_names, scenario.controller.model,
                             steps_per_chunk=100)
-    for meas, res, due in steps[:100]:
+    for meas, res, due in steps[:150]:
         recorder.record(meas, res, due)
     recorder.file._out = InterruptedWrite(recorder.file._out)
     with pytest.raises(KeyboardInterrupt):
-        for meas, res, due in steps[100:]:
+        for meas, res, due in steps[150:]:
             recorder.record(meas, res, due)
     recorder.close()
     content = read_mcap(path)

@@ -20,10 +20,10 @@ rosbags type store give, so ``ros2 bag info/play``, Foxglove and PlotJuggler
 open it.
 
 Where the time goes: a 30 s run is 6000 control periods of ten messages each.
-Building a message object and serialising it costs about 10 us per message
-and rosbags' ``Writer.write`` another 5 us, which doubled the run's wall
-time.  So the recorder keeps the steps of one chunk, turns their numbers
-into CDR bytes for all of them at once (:class:`messages.CdrLayout`,
+Building each message object, serialising it with the type store and
+rosbags' ``Writer.write`` doubled the run's wall time.  So the recorder
+copies each period's numbers into a buffer and, a chunk at a time, turns
+them into CDR bytes for all messages at once (:class:`messages.CdrLayout`,
 probed from the messages ``sim_outputs``/``controller_outputs`` build) and
 writes the chunk whole (:class:`McapFile`, the records rosbags' Writer
 writes).
@@ -235,20 +235,31 @@ class McapFile:
 class McapRecorder:
     """Record what sim_node and controller_node publish each control period into ``path``.
 
-    One :meth:`record` call per period.  The steps of one chunk
-    (``steps_per_chunk`` periods) are kept, not copied -- their arrays must not
-    change afterwards -- and written together: the numbers of every topic
-    stacked (:func:`messages.sim_output_arrays`,
-    :func:`messages.controller_output_arrays`) and put into the CDR bytes of a
-    message built by ``sim_outputs``/``controller_outputs`` for sentinel values
-    (:class:`messages.CdrLayout`).  /diagnostics (1 Hz and on a status change)
-    is built and serialised message by message.  Use as a context manager;
+    One :meth:`record` call per period copies the period's numbers into a
+    buffer of ``steps_per_chunk`` rows.  A full buffer is written as one MCAP
+    chunk before the next period is added (and by :meth:`flush` and
+    :meth:`close`): the numbers of every topic
+    (:func:`messages.sim_output_arrays`, :func:`messages.controller_output_arrays`)
+    put into the CDR bytes of the message ``sim_outputs``/``controller_outputs``
+    build for sentinel values (:class:`messages.CdrLayout`).  /diagnostics
+    (1 Hz and on a status change) is built and serialised message by message.
+    Use as a context manager;
     the file is complete after :meth:`close` also when a run fails.
     """
 
     def __init__(self, path, joint_names, model, steps_per_chunk=1000):
         self.msgs = m.rosbags_messages()
-        self.steps_per_chunk = steps_per_chunk
+        n, m2, m1 = len(joint_names), 2 * model.m, model.m
+        # the fields of Measurement and StepResult that sim_outputs/controller_outputs read
+        self._meas = np.empty(steps_per_chunk, dtype=[
+            ("t", "f8"), ("q", "f8", n), ("qd", "f8", n), ("tau_applied", "f8", n),
+            ("feature_stamp", "f8"), ("pixels", "f8", m2), ("true_depth", "f8", m1)])
+        self._res = np.empty(steps_per_chunk, dtype=[
+            ("t", "f8"), ("tau", "f8", n), ("x_d", "f8", m2), ("x_obs", "f8", m2),
+            ("error", "f8", m2), ("z_hat", "f8", m1), ("a_z_perp", "f8", model.p_perp),
+            ("a_z", "f8", model.p_z), ("a_d", "f8", model.p_d)])
+        self._count = 0
+        self._diagnostics = {}  # row -> CDR of /diagnostics
         self.file = McapFile(path)
         try:
             self.channels = {topic: self.file.add_channel(topic, m.MESSAGE_TYPES[short],
@@ -258,41 +269,40 @@ class McapRecorder:
         except BaseException:
             self.file.discard()
             raise
-        self._steps = []
-        self._diagnostics = {}  # step index in the chunk -> CDR of /diagnostics
 
     def record(self, meas, res, diagnostics_due):
         """Add one control period: the measurement ``meas``, the controller's ``res``."""
+        if self._count == len(self._meas):
+            self.flush()
+        k = self._count
+        self._store(k, meas, res)
         if diagnostics_due:
             level, message, values = health(res)
             msg = m.diagnostics_to_msg(self.msgs, meas.t, "controller_node", level, message,
                                        values, "controller")
-            self._diagnostics[len(self._steps)] = bytes(self.msgs.typestore.serialize_cdr(
+            self._diagnostics[k] = bytes(self.msgs.typestore.serialize_cdr(
                 msg, m.MESSAGE_TYPES["DiagnosticArray"]))
-        self._steps.append((meas, res))
-        if len(self._steps) >= self.steps_per_chunk:
-            self.flush()
+        self._count = k + 1
 
     def flush(self):
-        """Write the kept steps as one chunk (nothing if there are none)."""
-        if not self._steps:
+        """Write the recorded periods as one chunk (nothing if there are none)."""
+        if self._count == 0:
             return
-        meas, res = _stack(self._steps)
-        records, index = self._chunk(meas, res)
+        records, index = self._chunk(*self._stacked(self._count))
         self.file.write_chunk(records, index)
-        self._steps, self._diagnostics = [], {}
+        self._count, self._diagnostics = 0, {}
 
     def close(self):
-        """Write the kept steps and finish the file.
+        """Write the recorded periods and finish the file.
 
-        A failure to write the kept steps is logged, not raised: close runs
-        while a run ends, possibly on another error, and the file must be
-        finished either way (call :meth:`flush` first to see the error).
+        A failure to write the periods is logged, not raised: close runs while
+        a run ends, possibly on another error, and the file must be finished
+        either way (call :meth:`flush` first to see the error).
         """
         try:
             self.flush()
         except Exception:  # noqa: BLE001 -- the file is finished below either way
-            log.exception("recording: the last %d steps could not be written", len(self._steps))
+            log.exception("recording: the last %d periods could not be written", self._count)
         finally:
             self.file.close()
 
@@ -301,6 +311,22 @@ class McapRecorder:
 
     def __exit__(self, *exc):
         self.close()
+
+    def _store(self, k, meas, res):
+        frame = meas.pixels is not None
+        self._meas[k] = (meas.t, meas.q, meas.qd, meas.tau_applied,
+                         meas.feature_stamp if frame else np.nan,
+                         meas.pixels if frame else np.nan, meas.true_depth)
+        st = res.state
+        self._res[k] = (res.t, res.tau, res.x_d, res.x_obs, res.error, res.z_hat,
+                        st.a_z_perp, st.a_z, st.a_d)
+
+    def _stacked(self, count):
+        """The first ``count`` rows as a Measurement and a StepResult of (count, ...) arrays."""
+        meas, res = self._meas[:count], self._res[:count]
+        state = SimpleNamespace(a_z_perp=res["a_z_perp"], a_z=res["a_z"], a_d=res["a_d"])
+        return (SimpleNamespace(**{name: meas[name] for name in meas.dtype.names}),
+                SimpleNamespace(state=state, **{name: res[name] for name in res.dtype.names}))
 
     def _probe(self, joint_names, model):
         """Topic -> (message record head, CdrLayout) from messages built for sentinel values.
@@ -325,7 +351,8 @@ class McapRecorder:
                      self.msgs, meas, joint_names)]
                  + [(t.replace("~", CONTROLLER_NS), msg) for t, msg in m.controller_outputs(
                      self.msgs, res, labels)])
-        numbers = self._numbers(*_stack([(meas, res)]))
+        self._store(0, meas, res)
+        numbers = self._numbers(*self._stacked(1))
         if [topic for topic, _ in built] != [topic for topic, *_ in numbers]:
             raise RuntimeError("messages.sim_output_arrays/controller_output_arrays do not list "
                                "the topics of sim_outputs/controller_outputs")
@@ -346,7 +373,7 @@ class McapRecorder:
                    for t, *rest in m.controller_output_arrays(res)])
 
     def _chunk(self, meas, res):
-        """(message records, message index) of the kept steps, in the order published."""
+        """(message records, message index) of the recorded periods, in the order published."""
         k = len(meas.t)
         log_time = m.stamps_ns(meas.t)
         times = log_time.astype("<u8").view(np.uint8).reshape(k, 8)
@@ -393,33 +420,6 @@ class McapRecorder:
             rows = sorted(diag)
             index[self.channels["/diagnostics"]] = (log_time[rows], starts[rows, -1])
         return b"".join(parts), index
-
-
-def _stack(steps):
-    """(measurements, results) of ``steps`` as namespaces of arrays stacked over the steps."""
-    meas = [s for s, _ in steps]
-    res = [r for _, r in steps]
-    width = len(res[0].x_obs)
-    no_frame = np.full(width, np.nan)
-    stacked_meas = SimpleNamespace(
-        t=np.array([s.t for s in meas], dtype=float),
-        q=np.array([s.q for s in meas], dtype=float),
-        qd=np.array([s.qd for s in meas], dtype=float),
-        tau_applied=np.array([s.tau_applied for s in meas], dtype=float),
-        feature_stamp=np.array([s.feature_stamp for s in meas], dtype=float),
-        pixels=np.array([no_frame if s.pixels is None else s.pixels for s in meas], dtype=float),
-        true_depth=np.array([s.true_depth for s in meas], dtype=float))
-    stacked_res = SimpleNamespace(
-        t=np.array([r.t for r in res], dtype=float),
-        tau=np.array([r.tau for r in res], dtype=float),
-        x_d=np.array([r.x_d for r in res], dtype=float),
-        x_obs=np.array([r.x_obs for r in res], dtype=float),
-        error=np.array([r.error for r in res], dtype=float),
-        z_hat=np.array([r.z_hat for r in res], dtype=float),
-        state=SimpleNamespace(a_z_perp=np.array([r.state.a_z_perp for r in res], dtype=float),
-                              a_z=np.array([r.state.a_z for r in res], dtype=float),
-                              a_d=np.array([r.state.a_d for r in res], dtype=float)))
-    return stacked_meas, stacked_res
 
 
 def write_csv(path, columns, rows):
