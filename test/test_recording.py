@@ -88,6 +88,18 @@ class ReferenceRecorder:
         shutil.rmtree(self.tmp)
 
 
+def test_the_minimal_type_store_has_the_jazzy_definitions():
+    minimal = m.rosbags_messages_minimal().typestore
+    jazzy = m.rosbags_messages().typestore
+    names = set(m.JAZZY_DEFINITIONS) | {"builtin_interfaces/msg/Time"}
+    assert set(m.MESSAGE_TYPES.values()) <= names
+    for name in sorted(names):
+        assert minimal.fielddefs[name] == jazzy.fielddefs[name], name
+        assert minimal.generate_msgdef(name, ros_version=2) == jazzy.generate_msgdef(
+            name, ros_version=2), name
+        assert minimal.hash_rihs01(name) == jazzy.hash_rihs01(name), name
+
+
 def records(data, start, end):
     """(offset, opcode, body) of the records in ``data[start:end]``."""
     at = start

@@ -242,13 +242,14 @@ class McapRecorder:
     (:func:`messages.sim_output_arrays`, :func:`messages.controller_output_arrays`)
     put into the CDR bytes of the message ``sim_outputs``/``controller_outputs``
     build for sentinel values (:class:`messages.CdrLayout`).  /diagnostics
-    (1 Hz and on a status change) is built and serialised message by message.
-    Use as a context manager;
+    (1 Hz and on a status change) is built and serialised message by message,
+    with a type store of the recorded types only
+    (:func:`messages.rosbags_messages_minimal`).  Use as a context manager;
     the file is complete after :meth:`close` also when a run fails.
     """
 
     def __init__(self, path, joint_names, model, steps_per_chunk=1000):
-        self.msgs = m.rosbags_messages()
+        self.msgs = m.rosbags_messages_minimal()
         n, m2, m1 = len(joint_names), 2 * model.m, model.m
         # the fields of Measurement and StepResult that sim_outputs/controller_outputs read
         self._meas = np.empty(steps_per_chunk, dtype=[
