@@ -261,7 +261,7 @@ def closed_loop_steps(scenario, count):
                 meas = replace(meas, pixels=np.full_like(meas.pixels, np.nan))
             elif 80 <= k < 82:
                 meas = replace(meas, q=np.full_like(meas.q, np.nan))
-            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
+            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
             steps.append((meas, res, k % 50 == 0 or res.status != last))
             last = res.status
             sim.apply(res.tau)
