@@ -41,8 +41,10 @@ import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
+from conftest import PAPER_CONFIG
 from sim_bridge.simulator import Measurement, Simulator
 from visual_adaptive_servo import messages as m
+from visual_adaptive_servo.config import load_scenario
 from visual_adaptive_servo.controller import (AdaptiveVisualTracker, EstimatorState, health,
                                               StepResult)
 from visual_adaptive_servo.recording import CONTROLLER_NS, McapRecorder, SIM_NS, TOPICS
@@ -257,7 +259,7 @@ def closed_loop_steps(scenario, count):
             meas = sim.measure()
             if 40 <= k < 45 or k % 7 == 3:
                 meas = replace(meas, pixels=None, feature_stamp=None)
-            elif 60 <= k < 63:
+            elif 60 <= k < 70 and meas.pixels is not None:
                 meas = replace(meas, pixels=np.full_like(meas.pixels, np.nan))
             elif 80 <= k < 82:
                 meas = replace(meas, q=np.full_like(meas.q, np.nan))
@@ -270,7 +272,13 @@ def closed_loop_steps(scenario, count):
     return steps
 
 
-def test_closed_loop_recording_is_message_for_message_the_reference(tmp_path, scenario):
+SLOW_CAMERA = ["sim_node.camera_rate=40", "sim_node.camera_latency=0.012"]
+
+
+@pytest.mark.parametrize("camera", [[], SLOW_CAMERA],
+                         ids=["frame every period", "40 Hz camera, 12 ms latency"])
+def test_closed_loop_recording_is_message_for_message_the_reference(tmp_path, camera):
+    scenario = load_scenario(PAPER_CONFIG, camera)
     steps = closed_loop_steps(scenario, 300)
     assert {res.status for _, res, _ in steps} >= {"ok", "hold"}
     assert any(meas.pixels is None for meas, _, _ in steps)
