@@ -376,6 +376,19 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_a_valid_file_of_the_chunks_befor
         assert sum(c.msgcount for c in reader.connections) == len(content.messages)
 
 
+def test_the_file_gets_the_permissions_of_any_new_file(tmp_path, scenario):
+    umask = os.umask(0o022)
+    try:
+        with McapRecorder(tmp_path / "run.mcap", scenario.sim.joint_names,
+                          scenario.controller.model):
+            pass
+        (tmp_path / "plain").touch()
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "run.mcap").stat().st_mode == (tmp_path / "plain").stat().st_mode
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain", "run.mcap"]
+
+
 def test_recorded_run_decodes_to_its_timeseries(tmp_path, scenario):
     summary = run_scenario(scenario, str(tmp_path), duration=2.0, progress=False, plots=False)
     steps = summary["steps"]

@@ -36,7 +36,6 @@ import json
 import logging
 import os
 import struct
-import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -95,10 +94,9 @@ class McapFile:
 
     def __init__(self, path):
         self.path = Path(path)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}-", suffix=".mcap.part",
-                                   dir=self.path.parent)
-        self._tmp = Path(tmp)
-        self._out = os.fdopen(fd, "wb")
+        # a plain open, not tempfile's: the file gets the permissions the umask gives
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
+        self._out = open(self._tmp, "wb")
         self._out.write(MAGIC + _record(0x01, _string("ros2") + _string("visual_adaptive_servo")))
         self._end = self._out.tell()  # end of the last whole record
         self.schemas = {}             # msgtype -> (schema id, schema record body)
