@@ -31,6 +31,7 @@ import os
 import shutil
 import struct
 import tempfile
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -322,6 +323,13 @@ def test_random_steps_give_the_bytes_of_the_message_builders(tmp_path, rng, n, m
     ours, reference = record_both(tmp_path, steps, [f"joint{i}" for i in range(n)], model,
                                   steps_per_chunk=40)
     assert_same_recording(ours, reference)
+    # messages left out (no frame, NaN pixels, x_d or error not finite) were among the cases
+    channels = list(TOPICS)
+    counts = Counter(channels[msg[0] - 1] for msg in read_mcap(reference).messages)
+    for topic in ("/camera/features", f"{CONTROLLER_NS}/desired",
+                  f"{CONTROLLER_NS}/tracking_error"):
+        assert 0 < counts[topic] < len(steps), topic
+    assert counts["/joint_states"] == len(steps)
 
 
 def test_a_point_too_large_for_float32_is_refused_as_by_the_type_store(tmp_path, scenario):
