@@ -88,6 +88,47 @@ def rosbags_messages():
                       lambda v: np.asarray(v, dtype=np.uint8).reshape(-1).copy(), int, store)
 
 
+# The ROS 2 Jazzy definitions of MESSAGE_TYPES (builtin_interfaces/Time is in every rosbags
+# store).  Importing rosbags' whole Jazzy store (built on Iron, Humble, ... Dashing) costs
+# ``vas run`` about 0.065 s of CPU, a store of just these 0.01 s; test_recording checks
+# them against the Jazzy store.
+JAZZY_DEFINITIONS = {
+    "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id",
+    "sensor_msgs/msg/JointState": ("std_msgs/Header header\nstring[] name\nfloat64[] position\n"
+                                   "float64[] velocity\nfloat64[] effort"),
+    "sensor_msgs/msg/Image": ("std_msgs/Header header\nuint32 height\nuint32 width\n"
+                              "string encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data"),
+    "geometry_msgs/msg/Point32": "float32 x\nfloat32 y\nfloat32 z",
+    "geometry_msgs/msg/Polygon": "geometry_msgs/Point32[] points",
+    "geometry_msgs/msg/PolygonStamped": "std_msgs/Header header\ngeometry_msgs/Polygon polygon",
+    "std_msgs/msg/MultiArrayDimension": "string label\nuint32 size\nuint32 stride",
+    "std_msgs/msg/MultiArrayLayout": "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset",
+    "std_msgs/msg/Float64MultiArray": "std_msgs/MultiArrayLayout layout\nfloat64[] data",
+    "rosgraph_msgs/msg/Clock": "builtin_interfaces/Time clock",
+    "diagnostic_msgs/msg/KeyValue": "string key\nstring value",
+    "diagnostic_msgs/msg/DiagnosticStatus": ("byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\n"
+                                             "byte level\nstring name\nstring message\n"
+                                             "string hardware_id\n"
+                                             "diagnostic_msgs/KeyValue[] values"),
+    "diagnostic_msgs/msg/DiagnosticArray": ("std_msgs/Header header\n"
+                                            "diagnostic_msgs/DiagnosticStatus[] status"),
+}
+
+
+def rosbags_messages_minimal():
+    """:func:`rosbags_messages` from a type store holding only :data:`JAZZY_DEFINITIONS`."""
+    from rosbags.typesys import get_typestore, get_types_from_msg, Stores
+
+    store = get_typestore(Stores.EMPTY)
+    types = {}
+    for name, text in JAZZY_DEFINITIONS.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    classes = {short: store.types[full] for short, full in MESSAGE_TYPES.items()}
+    return MessageSet(classes, lambda v: np.asarray(v, dtype=np.float64).copy(),
+                      lambda v: np.asarray(v, dtype=np.uint8).reshape(-1).copy(), int, store)
+
+
 def rclpy_messages():
     """The installed ROS 2 Python message classes (needs a sourced ROS 2)."""
     classes = {}
@@ -293,3 +334,146 @@ def controller_outputs(msgs, res, labels):
     out.append(("~/parameters", float_array_to_msg(
         msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels)))
     return out
+
+
+# Recording many samples at once (``vas run``): the same bytes as the builders above
+# and the type store's serialize_cdr, from arrays, without a message object per sample.
+
+def sim_output_arrays(meas):
+    """The numbers of :func:`sim_outputs` for K measurements at once.
+
+    ``meas`` has the attributes of a Measurement stacked over K samples:
+    ``t`` and ``feature_stamp`` (K,) (NaN where no frame), ``q``, ``qd``,
+    ``tau_applied`` (K, n), ``pixels`` (K, 2m) (NaN rows where no frame) and
+    ``true_depth`` (K, m).  Returns ``(topic, present, stamp, blocks)`` per
+    topic in sim_outputs' order: ``present`` (K,) bool or None (every sample),
+    ``stamp`` (K,) seconds or None (no header), ``blocks`` the (K, w) float64
+    number arrays in the order the message serialises them.  A
+    :class:`CdrLayout` probed from the message sim_outputs builds turns them
+    into that message's bytes.
+    """
+    t = meas.t
+    has_frame = np.isfinite(meas.pixels).all(axis=1)
+    return [("/clock", None, t, []),
+            ("/joint_states", None, t, [meas.q, meas.qd, meas.tau_applied]),
+            ("/camera/features", has_frame, meas.feature_stamp, [_points(meas.pixels)]),
+            ("~/true_depth", None, None, [meas.true_depth])]
+
+
+def controller_output_arrays(res):
+    """The numbers of :func:`controller_outputs` for K StepResults at once.
+
+    ``res`` has the attributes of a StepResult stacked over K samples (``t``
+    (K,), ``tau`` (K, n), ``x_d``, ``x_obs``, ``error`` (K, 2m), ``z_hat``
+    (K, m), ``state.a_z_perp`` ... (K, p)); returns what
+    :func:`sim_output_arrays` returns, in controller_outputs' order.
+    """
+    t = res.t
+    st = res.state
+    return [("/effort_controller/commands", None, None, [res.tau]),
+            ("~/desired", np.isfinite(res.x_d).all(axis=1), t, [_points(res.x_d)]),
+            ("~/observed", None, t, [_points(res.x_obs)]),
+            ("~/tracking_error", np.isfinite(res.error).all(axis=1), t, [_points(res.error)]),
+            ("~/estimated_depth", None, None, [res.z_hat]),
+            ("~/parameters", None, None,
+             [np.concatenate([st.a_z_perp, st.a_z, st.a_d], axis=1)])]
+
+
+def _points(pixels):
+    """(K, 2m) pixels -> (K, 3m) Point32 coordinates (u, v, 0) as :func:`features_to_msg`."""
+    uv = np.asarray(pixels, dtype=float).reshape(len(pixels), -1, 2)
+    return np.concatenate([uv, np.zeros(uv.shape[:2] + (1,))], axis=2).reshape(len(uv), -1)
+
+
+def stamps_ns(times):
+    """Seconds (K,) -> int64 nanoseconds (K,), rounded as :func:`time_to_stamp` rounds."""
+    times = np.asarray(times, dtype=float)
+    if not np.all(times >= 0.0):  # also refuses NaN
+        raise ValueError(f"stamp: negative or undefined time {times[~(times >= 0.0)][0]}")
+    # np.rint rounds half to even, as round() does in time_to_stamp
+    return np.rint(times * 1e9).astype(np.int64)
+
+
+class CdrLayout:
+    """The CDR bytes of one fixed-size message and where its varying numbers sit.
+
+    Built by :meth:`probe` from the serialised bytes of a message whose stamp and
+    numbers are known, so the layout follows the message builders and the type
+    store rather than restating the CDR rules.  :meth:`serialize` then writes
+    the bytes of K messages of the same shape: the template with the stamp
+    (builtin_interfaces/Time: int32 sec, uint32 nanosec) and each number block
+    (float64, or float32 where the field is, as Point32's) overwritten.
+    """
+
+    def __init__(self, template, stamp_at, blocks):
+        self.template = np.frombuffer(template, dtype=np.uint8)
+        self.stamp_at = stamp_at     # byte offset of the stamp, or None
+        self.blocks = blocks         # (byte offset, '<f8' or '<f4', width) per block
+
+    @classmethod
+    def probe(cls, raw, stamp, blocks):
+        """Find ``stamp`` (seconds or None) and each 1-D block of float64 in ``raw``.
+
+        Each must occur exactly once (the caller picks distinctive values);
+        a block is looked for as float64, then as float32.
+        """
+        raw = bytes(raw)
+        stamp_at = None
+        if stamp is not None:
+            ns = int(stamps_ns([stamp])[0])
+            stamp_at = _find_once(raw, np.array([(ns // 10**9, ns % 10**9)], dtype="<i4,<u4")
+                                  .tobytes(), "the stamp")
+            if stamp_at is None:
+                raise ValueError("CDR layout: the stamp is not in the message")
+        found = []
+        for i, block in enumerate(blocks):
+            block = np.asarray(block, dtype=float)
+            if block.size == 0:
+                found.append((0, "<f8", 0))
+                continue
+            for dtype in ("<f8", "<f4"):
+                at = _find_once(raw, block.astype(dtype).tobytes(), f"block {i}")
+                if at is not None:
+                    found.append((at, dtype, block.size))
+                    break
+            else:
+                raise ValueError(f"CDR layout: block {i} is not in the message")
+        return cls(raw, stamp_at, found)
+
+    @property
+    def size(self):
+        return self.template.size
+
+    def serialize(self, stamps, blocks):
+        """(K, size) uint8: the CDR of K messages with these stamps (K,) and (K, w) blocks.
+
+        Raises OverflowError where a finite value does not fit a float32 field,
+        as the type store's serializer does.
+        """
+        k = len(blocks[0]) if blocks else len(stamps)
+        out = np.empty((k, self.size), dtype=np.uint8)
+        out[:] = self.template
+        if self.stamp_at is not None:
+            ns = stamps_ns(stamps)
+            stamp = np.empty(k, dtype="<i4,<u4")
+            stamp["f0"], stamp["f1"] = ns // 10**9, ns % 10**9
+            out[:, self.stamp_at:self.stamp_at + 8] = stamp.view(np.uint8).reshape(k, 8)
+        for (at, dtype, width), values in zip(self.blocks, blocks):
+            values = np.asarray(values, dtype=float)
+            if values.shape != (k, width):
+                raise ValueError(f"CDR layout: expected {width} values per message, "
+                                 f"got shape {values.shape[1:]}")
+            with np.errstate(over="ignore"):
+                wire = values.astype(dtype)
+            if dtype == "<f4" and np.any(np.isinf(wire) & np.isfinite(values)):
+                raise OverflowError("float too large to pack with f format")
+            out[:, at:at + wire.itemsize * width] = wire.view(np.uint8).reshape(k, -1)
+        return out
+
+
+def _find_once(raw, pattern, what):
+    """Offset of ``pattern`` in ``raw``, None if absent; ValueError if it occurs twice."""
+    at = raw.find(pattern)
+    if at >= 0 and raw.find(pattern, at + 1) >= 0:
+        raise ValueError(f"CDR layout: {what} occurs more than once in the message")
+    return at if at >= 0 else None

@@ -15,22 +15,37 @@
 """Recording a run: a rosbag2 MCAP file with the nodes' topics, a CSV and summary.json.
 
 The MCAP file holds the same topics and message types the ROS nodes publish
-(DESIGN.md section 2), built with the same conversion functions, so
-``ros2 bag info/play``, Foxglove and PlotJuggler open it.
+(DESIGN.md section 2), with the bytes the nodes' conversion functions and the
+rosbags type store give, so ``ros2 bag info/play``, Foxglove and PlotJuggler
+open it.
+
+Where the time goes: a 30 s run is 6000 control periods of ten messages each.
+Building each message object, serialising it with the type store and
+rosbags' ``Writer.write`` doubled the run's wall time.  So the recorder
+copies each period's numbers into a buffer and, a chunk at a time, turns
+them into CDR bytes for all messages at once (:class:`messages.CdrLayout`,
+probed from the messages ``sim_outputs``/``controller_outputs`` build) and
+writes the chunk whole (:class:`McapFile`, the records rosbags' Writer
+writes).
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
-import shutil
-import tempfile
+import struct
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
+import yaml
 
 from . import messages as m
+from .controller import health
+
+log = logging.getLogger(__name__)
 
 SIM_NS = "/sim_node"
 CONTROLLER_NS = "/controller_node"
@@ -49,51 +64,361 @@ TOPICS = {
     "/diagnostics": "DiagnosticArray",
 }
 
+MAGIC = b"\x89MCAP0\r\n"
+# Message record: opcode, record length, channel id, sequence, log time, publish time, data
+MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+LOG_TIME_AT = 15  # byte offsets of the two times in MESSAGE_HEAD
+PUBLISH_TIME_AT = 23
 
-class McapRecorder:
-    """Stream messages into ``path`` (a single MCAP file), closed even on errors.
 
-    rosbags writes a bag directory (metadata.yaml + one .mcap); the .mcap is
-    self-describing, so on close it is moved to ``path`` and the directory
-    removed.  Use as a context manager.
+def _string(text):
+    data = text.encode()
+    return struct.pack("<I", len(data)) + data
+
+
+def _record(opcode, body):
+    return struct.pack("<BQ", opcode, len(body)) + body
+
+
+class McapFile:
+    """An MCAP file of the ros2 profile, with the records rosbags' Writer writes.
+
+    Schemas (ros2msg definitions and RIHS01 hashes from the type store),
+    channels (cdr, ``offered_qos_profiles`` metadata), a ``rosbag2`` metadata
+    record with the bag's metadata.yaml, chunk and message indexes, statistics
+    and summary offsets.  Messages come as whole chunks of ready message
+    records (:meth:`write_chunk`).  The file is written next to ``path`` and
+    moved there by :meth:`close`; a write cut short (Ctrl-C) is undone, so the
+    file can still be finished.
     """
 
     def __init__(self, path):
-        from rosbags.rosbag2 import StoragePlugin, Writer
-
         self.path = Path(path)
-        self.msgs = m.rosbags_messages()
-        self._tmp = Path(tempfile.mkdtemp(prefix="vas-bag-", dir=self.path.parent))
-        self._bagdir = self._tmp / self.path.stem
-        self.writer = Writer(self._bagdir, version=9, storage_plugin=StoragePlugin.MCAP)
-        self.writer.open()
-        self.connections = {}
-        for topic, short in TOPICS.items():
-            msgtype = m.MESSAGE_TYPES[short]
-            self.connections[topic] = (self.writer.add_connection(
-                topic, msgtype, typestore=self.msgs.typestore), msgtype)
+        # a plain open, not tempfile's: the file gets the permissions the umask gives
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
+        self._out = open(self._tmp, "wb")
+        self._out.write(MAGIC + _record(0x01, _string("ros2") + _string("visual_adaptive_servo")))
+        self._end = self._out.tell()  # end of the last whole record
+        self.schemas = {}             # msgtype -> (schema id, schema record body)
+        self.channels = []            # (channel id, topic, msgtype, RIHS01, record body)
+        self.counts = {}              # channel id -> messages
+        self.chunk_indexes = []
+        self.start, self.end = None, None
 
-    def write(self, topic, t, msg):
-        conn, msgtype = self.connections[topic]
-        self.writer.write(conn, int(round(t * 1e9)),
-                          self.msgs.typestore.serialize_cdr(msg, msgtype))
+    def add_channel(self, topic, msgtype, typestore):
+        """Register ``topic`` (and its type's schema once); return the channel id."""
+        if msgtype not in self.schemas:
+            msgdef, _ = typestore.generate_msgdef(msgtype, ros_version=2)
+            body = (struct.pack("<H", len(self.schemas) + 1) + _string(msgtype)
+                    + _string("ros2msg") + _string(msgdef))
+            self.schemas[msgtype] = (len(self.schemas) + 1, body)
+            self._write(_record(0x03, body))
+        channel_id = len(self.channels) + 1
+        metadata = _string("offered_qos_profiles") + _string("[]")
+        body = (struct.pack("<HH", channel_id, self.schemas[msgtype][0]) + _string(topic)
+                + _string("cdr") + struct.pack("<I", len(metadata)) + metadata)
+        self.channels.append((channel_id, topic, msgtype, typestore.hash_rihs01(msgtype), body))
+        self.counts[channel_id] = 0
+        self._write(_record(0x04, body))
+        return channel_id
+
+    def write_chunk(self, records, index):
+        """Write one chunk of message ``records`` (bytes) and its message indexes.
+
+        ``index`` maps each channel id with messages in the chunk to
+        (log times (P,) ns, offsets (P,) of its records in ``records``).
+        """
+        start = min(int(times.min()) for times, _ in index.values())
+        end = max(int(times.max()) for times, _ in index.values())
+        body = (struct.pack("<QQQI", start, end, len(records), 0) + _string("")
+                + struct.pack("<Q", len(records)))
+        chunk = _record(0x06, body + records)
+        chunk_at = self._end
+        pieces, offsets, at = [chunk], [], chunk_at + len(chunk)
+        for channel_id, (times, where) in sorted(index.items()):
+            entries = np.column_stack([times, where]).astype("<u8").tobytes()
+            pieces.append(_record(0x07, struct.pack("<HI", channel_id, len(entries)) + entries))
+            offsets.append(struct.pack("<HQ", channel_id, at))
+            at += len(pieces[-1])
+        self._write(b"".join(pieces))
+        offsets = b"".join(offsets)
+        self.chunk_indexes.append(
+            struct.pack("<QQQQI", start, end, chunk_at, len(chunk), len(offsets)) + offsets
+            + struct.pack("<Q", at - chunk_at - len(chunk)) + _string("")
+            + struct.pack("<QQ", len(records), len(records)))
+        for channel_id, (times, _) in index.items():
+            self.counts[channel_id] += len(times)
+        self.start = start if self.start is None else min(self.start, start)
+        self.end = end if self.end is None else max(self.end, end)
 
     def close(self):
-        if self.writer is None:
+        """Write metadata, summary and footer and move the file to ``path``."""
+        if self._out is None:
             return
         try:
-            self.writer.close()
-            produced = self._bagdir / f"{self._bagdir.name}.mcap"
-            os.replace(produced, self.path)
+            self._write_summary()
+            self._out.close()
+            os.replace(self._tmp, self.path)
+        except BaseException:
+            self.discard()
+            raise
+        self._out = None
+
+    def discard(self):
+        """Close and delete the unfinished file."""
+        if self._out is not None:
+            self._out.close()
+            self._out = None
+            self._tmp.unlink(missing_ok=True)
+
+    def _write(self, data):
+        try:
+            self._out.write(data)
+        except BaseException:
+            # a write cut short (Ctrl-C) is undone: the file ends with whole records
+            self._out.seek(self._end)
+            self._out.truncate()
+            raise
+        self._end += len(data)
+
+    def _write_summary(self):
+        pairs = _string("serialized_metadata") + _string(self._bag_metadata())
+        metadata_at = self._end
+        self._write(_record(0x0C, _string("rosbag2") + struct.pack("<I", len(pairs)) + pairs))
+        metadata_length = self._end - metadata_at
+        self._write(_record(0x0F, struct.pack("<I", 0)))
+        groups = []
+
+        def group(opcode, records):
+            at = self._end
+            self._write(b"".join(_record(opcode, body) for body in records))
+            groups.append(struct.pack("<BQQ", opcode, at, self._end - at))
+
+        summary_at = self._end
+        group(0x03, [body for _, body in self.schemas.values()])
+        group(0x04, [channel[-1] for channel in self.channels])
+        if self.chunk_indexes:
+            group(0x08, self.chunk_indexes)
+        group(0x0D, [struct.pack("<QQ", metadata_at, metadata_length) + _string("rosbag2")])
+        counts = b"".join(struct.pack("<HQ", cid, n) for cid, n in sorted(self.counts.items()))
+        group(0x0B, [struct.pack("<QHIIIIQQI", sum(self.counts.values()), len(self.schemas),
+                                 len(self.channels), 0, 1, len(self.chunk_indexes),
+                                 self.start or 0, self.end or 0, len(counts)) + counts])
+        offsets_at = self._end
+        self._write(b"".join(_record(0x0E, body) for body in groups))
+        self._write(_record(0x02, struct.pack("<QQI", summary_at, offsets_at, 0)) + MAGIC)
+
+    def _bag_metadata(self):
+        """The rosbag2 metadata.yaml (version 9) rosbags' Writer would write for this bag."""
+        count = sum(self.counts.values())
+        start = self.start or 0
+        duration = (self.end or 0) - start
+        return yaml.safe_dump({
+            "version": 9, "storage_identifier": "mcap", "relative_file_paths": [self.path.name],
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start}, "message_count": count,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": topic, "type": msgtype, "serialization_format": "cdr",
+                                    "offered_qos_profiles": [],
+                                    "type_description_hash": digest},
+                 "message_count": self.counts[cid]}
+                for cid, topic, msgtype, digest, _ in self.channels],
+            "compression_format": "", "compression_mode": "",
+            "files": [{"path": self.path.name, "starting_time": {"nanoseconds_since_epoch": start},
+                       "duration": {"nanoseconds": duration}, "message_count": count}],
+            "custom_data": None, "ros_distro": "rosbags",
+        }, default_flow_style=False).strip()
+
+
+class McapRecorder:
+    """Record what sim_node and controller_node publish each control period into ``path``.
+
+    One :meth:`record` call per period copies the period's numbers into a
+    buffer of ``steps_per_chunk`` rows.  A full buffer is written as one MCAP
+    chunk before the next period is added (and by :meth:`flush` and
+    :meth:`close`): the numbers of every topic
+    (:func:`messages.sim_output_arrays`, :func:`messages.controller_output_arrays`)
+    put into the CDR bytes of the message ``sim_outputs``/``controller_outputs``
+    build for sentinel values (:class:`messages.CdrLayout`).  /diagnostics
+    (1 Hz and on a status change) is built and serialised message by message,
+    with a type store of the recorded types only
+    (:func:`messages.rosbags_messages_minimal`).  Use as a context manager;
+    the file is complete after :meth:`close` also when a run fails.
+    """
+
+    def __init__(self, path, joint_names, model, steps_per_chunk=1000):
+        self.msgs = m.rosbags_messages_minimal()
+        n, m2, m1 = len(joint_names), 2 * model.m, model.m
+        # the fields of Measurement and StepResult that sim_outputs/controller_outputs read
+        self._meas = np.empty(steps_per_chunk, dtype=[
+            ("t", "f8"), ("q", "f8", n), ("qd", "f8", n), ("tau_applied", "f8", n),
+            ("feature_stamp", "f8"), ("pixels", "f8", m2), ("true_depth", "f8", m1)])
+        self._res = np.empty(steps_per_chunk, dtype=[
+            ("t", "f8"), ("tau", "f8", n), ("x_d", "f8", m2), ("x_obs", "f8", m2),
+            ("error", "f8", m2), ("z_hat", "f8", m1), ("a_z_perp", "f8", model.p_perp),
+            ("a_z", "f8", model.p_z), ("a_d", "f8", model.p_d)])
+        self._count = 0
+        self._diagnostics = {}  # row -> CDR of /diagnostics
+        self.file = McapFile(path)
+        try:
+            self.channels = {topic: self.file.add_channel(topic, m.MESSAGE_TYPES[short],
+                                                          self.msgs.typestore)
+                             for topic, short in TOPICS.items()}
+            self._layouts = self._probe(list(joint_names), model)
+        except BaseException:
+            self.file.discard()
+            raise
+
+    def record(self, meas, res, diagnostics_due):
+        """Add one control period: the measurement ``meas``, the controller's ``res``."""
+        if self._count == len(self._meas):
+            self.flush()
+        k = self._count
+        self._store(k, meas, res)
+        if diagnostics_due:
+            level, message, values = health(res)
+            msg = m.diagnostics_to_msg(self.msgs, meas.t, "controller_node", level, message,
+                                       values, "controller")
+            self._diagnostics[k] = bytes(self.msgs.typestore.serialize_cdr(
+                msg, m.MESSAGE_TYPES["DiagnosticArray"]))
+        self._count = k + 1
+
+    def flush(self):
+        """Write the recorded periods as one chunk (nothing if there are none)."""
+        if self._count == 0:
+            return
+        records, index = self._chunk(*self._stacked(self._count))
+        self.file.write_chunk(records, index)
+        self._count, self._diagnostics = 0, {}
+
+    def close(self):
+        """Write the recorded periods and finish the file.
+
+        A failure to write the periods is logged, not raised: close runs while
+        a run ends, possibly on another error, and the file must be finished
+        either way (call :meth:`flush` first to see the error).
+        """
+        try:
+            self.flush()
+        except Exception:  # noqa: BLE001 -- the file is finished below either way
+            log.exception("recording: the last %d periods could not be written", self._count)
         finally:
-            self.writer = None
-            shutil.rmtree(self._tmp, ignore_errors=True)
+            self.file.close()
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
+
+    def _store(self, k, meas, res):
+        frame = meas.pixels is not None
+        self._meas[k] = (meas.t, meas.q, meas.qd, meas.tau_applied,
+                         meas.feature_stamp if frame else np.nan,
+                         meas.pixels if frame else np.nan, meas.true_depth)
+        st = res.state
+        self._res[k] = (res.t, res.tau, res.x_d, res.x_obs, res.error, res.z_hat,
+                        st.a_z_perp, st.a_z, st.a_d)
+
+    def _stacked(self, count):
+        """The first ``count`` rows as a Measurement and a StepResult of (count, ...) arrays."""
+        meas, res = self._meas[:count], self._res[:count]
+        state = SimpleNamespace(a_z_perp=res["a_z_perp"], a_z=res["a_z"], a_d=res["a_d"])
+        return (SimpleNamespace(**{name: meas[name] for name in meas.dtype.names}),
+                SimpleNamespace(state=state, **{name: res[name] for name in res.dtype.names}))
+
+    def _probe(self, joint_names, model):
+        """Topic -> (message record head, CdrLayout) from messages built for sentinel values.
+
+        The sentinels are random, so each number occurs once in its message.
+        """
+        rng = np.random.default_rng(0)
+        n, m2 = len(joint_names), 2 * model.m
+
+        def values(size):
+            return rng.uniform(1.0, 2.0, size)
+
+        meas = SimpleNamespace(t=1234.5678901, q=values(n), qd=values(n), tau_applied=values(n),
+                               feature_stamp=1234.5012345, pixels=values(m2),
+                               true_depth=values(model.m))
+        res = SimpleNamespace(t=meas.t, tau=values(n), x_d=values(m2), x_obs=values(m2),
+                              error=values(m2), z_hat=values(model.m),
+                              state=SimpleNamespace(a_z_perp=values(model.p_perp),
+                                                    a_z=values(model.p_z), a_d=values(model.p_d)))
+        labels = m.parameter_labels(model)
+        built = ([(t.replace("~", SIM_NS), msg) for t, msg in m.sim_outputs(
+                     self.msgs, meas, joint_names)]
+                 + [(t.replace("~", CONTROLLER_NS), msg) for t, msg in m.controller_outputs(
+                     self.msgs, res, labels)])
+        self._store(0, meas, res)
+        numbers = self._numbers(*self._stacked(1))
+        if [topic for topic, _ in built] != [topic for topic, *_ in numbers]:
+            raise RuntimeError("messages.sim_output_arrays/controller_output_arrays do not list "
+                               "the topics of sim_outputs/controller_outputs")
+        layouts = {}
+        for (topic, msg), (_, _, stamp, blocks) in zip(built, numbers):
+            raw = self.msgs.typestore.serialize_cdr(msg, m.MESSAGE_TYPES[TOPICS[topic]])
+            layout = m.CdrLayout.probe(raw, None if stamp is None else stamp[0],
+                                       [block[0] for block in blocks])
+            head = np.frombuffer(MESSAGE_HEAD.pack(0x05, MESSAGE_HEAD.size - 9 + layout.size,
+                                                   self.channels[topic], 0, 0, 0), np.uint8)
+            layouts[topic] = (head, layout)
+        return layouts
+
+    @staticmethod
+    def _numbers(meas, res):
+        return ([(t.replace("~", SIM_NS), *rest) for t, *rest in m.sim_output_arrays(meas)]
+                + [(t.replace("~", CONTROLLER_NS), *rest)
+                   for t, *rest in m.controller_output_arrays(res)])
+
+    def _chunk(self, meas, res):
+        """(message records, message index) of the recorded periods, in the order published."""
+        k = len(meas.t)
+        log_time = m.stamps_ns(meas.t)
+        times = log_time.astype("<u8").view(np.uint8).reshape(k, 8)
+        numbers = self._numbers(meas, res)
+        sizes = [MESSAGE_HEAD.size + self._layouts[topic][1].size for topic, *_ in numbers]
+        frame = np.empty((k, sum(sizes)), dtype=np.uint8)
+        present = np.ones((k, len(numbers)), dtype=bool)
+        at = 0
+        for j, (topic, published, stamp, blocks) in enumerate(numbers):
+            head, layout = self._layouts[topic]
+            rows = slice(None) if published is None else published
+            end = at + head.size
+            frame[:, at:end] = head
+            frame[:, at + LOG_TIME_AT:at + LOG_TIME_AT + 8] = times
+            frame[:, at + PUBLISH_TIME_AT:at + PUBLISH_TIME_AT + 8] = times
+            frame[rows, end:end + layout.size] = layout.serialize(
+                None if stamp is None else stamp[rows], [block[rows] for block in blocks])
+            if published is not None:
+                present[:, j] = published
+            at = end + layout.size
+        sizes = np.array(sizes)
+        data = frame.reshape(-1) if present.all() else frame[np.repeat(present, sizes, axis=1)]
+        # /diagnostics comes after the step's other messages
+        diag = {s: MESSAGE_HEAD.pack(0x05, MESSAGE_HEAD.size - 9 + len(cdr),
+                                     self.channels["/diagnostics"], 0, log_time[s],
+                                     log_time[s]) + cdr
+                for s, cdr in self._diagnostics.items()}
+        lengths = np.zeros((k, len(numbers) + 1), dtype=np.int64)
+        lengths[:, :-1] = present * sizes
+        lengths[list(diag), -1] = [len(r) for r in diag.values()]
+        starts = (np.cumsum(lengths) - lengths.ravel()).reshape(lengths.shape)
+        ends = np.cumsum(lengths[:, :-1].sum(axis=1))
+        parts, done = [], 0
+        for s, record in sorted(diag.items()):
+            parts += [data[done:ends[s]], record]
+            done = ends[s]
+        parts.append(data[done:])
+        index = {}
+        for j, (topic, *_) in enumerate(numbers):
+            rows = present[:, j]
+            if rows.any():
+                index[self.channels[topic]] = (log_time[rows], starts[rows, j])
+        if diag:
+            rows = sorted(diag)
+            index[self.channels["/diagnostics"]] = (log_time[rows], starts[rows, -1])
+        return b"".join(parts), index
 
 
 def write_csv(path, columns, rows):

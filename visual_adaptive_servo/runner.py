@@ -33,10 +33,9 @@ import numpy as np
 
 from sim_bridge.simulator import Simulator
 
-from . import messages as m
-from .controller import AdaptiveVisualTracker, health
+from .controller import AdaptiveVisualTracker
 from .plots import plot_run
-from .recording import CONTROLLER_NS, SIM_NS, McapRecorder, write_csv, write_json
+from .recording import McapRecorder, write_csv, write_json
 
 log = logging.getLogger(__name__)
 
@@ -91,19 +90,6 @@ class Series:
         return {k: v[:self.count] for k, v in self.data.items()}
 
 
-def _record_step(rec, msgs, names, labels, meas, res, diag_due):
-    """Record what sim_node and controller_node publish for this period."""
-    t = meas.t
-    for topic, msg in m.sim_outputs(msgs, meas, names):
-        rec.write(topic.replace("~", SIM_NS), t, msg)
-    for topic, msg in m.controller_outputs(msgs, res, labels):
-        rec.write(topic.replace("~", CONTROLLER_NS), t, msg)
-    if diag_due:
-        level, message, values = health(res)
-        rec.write("/diagnostics", t, m.diagnostics_to_msg(msgs, t, "controller_node", level,
-                                                          message, values, "controller"))
-
-
 def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, plots=True,
                  faults=None, controller_factory=AdaptiveVisualTracker):
     """Run the closed loop and write every output into ``out_dir``; return the summary.
@@ -135,12 +121,11 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     sim = Simulator(scenario.sim)
     ctl = controller_factory(scenario.controller)
     series = Series(steps, model)
-    labels = m.parameter_labels(model)
     counters = {"rejected": 0, "fallback": 0, "saturated": 0, "projection_active": 0,
                 "damped": 0, "sim_refused_commands": 0}
     diverged, reason, interrupted, error = False, "", False, None
-    recorder = McapRecorder(os.path.join(out_dir, "run.mcap")) if record else None
-    msgs = recorder.msgs if recorder else None
+    recorder = (McapRecorder(os.path.join(out_dir, "run.mcap"), scenario.sim.joint_names, model)
+                if record else None)
     detections = FrameDetections(scenario.detector)
     bar = Progress(steps, progress)
     limit = scenario.controller["divergence_torque"]
@@ -165,8 +150,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
             series.status.append(res.status)
             if recorder is not None:
-                _record_step(recorder, msgs, scenario.sim.joint_names, labels, meas, res,
-                             k % diag_every == 0 or res.status != last_status)
+                recorder.record(meas, res, k % diag_every == 0 or res.status != last_status)
             last_status = res.status
             unsat = res.tau_unsaturated if res.tau_unsaturated is not None else res.tau
             # divergence is judged on the plant itself, not on injected measurement faults;
@@ -186,6 +170,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                 counters["sim_refused_commands"] += 1
             if bar.enabled:
                 bar.update(k + 1, f"t={meas.t + period:6.2f} s")
+        if recorder is not None:
+            recorder.flush()  # here, so that a failure is reported as the run's error
     except KeyboardInterrupt:
         interrupted = True
         log.warning("interrupted: writing what was simulated so far")
