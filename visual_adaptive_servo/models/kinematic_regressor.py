@@ -194,7 +194,8 @@ class KinematicRegressor:
 
         Returns V (R, 3), dV and dV_rate (n, 3, R) with R rows: the S directions
         v_s, then (when there is a known part) w0_i of each point, then the
-        constant 1.  ``dV[l, :, r]`` is the derivative of row r by q_l.
+        constant 1, then 0 (what a column reads for a point it does not
+        involve).  ``dV[l, :, r]`` is the derivative of row r by q_l.
         """
         n, S = self.n, self.S
         sin_q, cos_q = np.sin(q), np.cos(q)
@@ -214,8 +215,9 @@ class KinematicRegressor:
         dV = (axes_x @ V.T) * self._moves                           # (n, 3, S)
         dV_rate = (axes_dot_x @ V.T + axes_x @ V_dot.T) * self._moves
         if not self.has_w0:
-            return (np.vstack([V, self._one_row]), np.concatenate([dV, self._zero_col], axis=2),
-                    np.concatenate([dV_rate, self._zero_col], axis=2))
+            return (np.vstack([V, self._last_rows]),
+                    np.concatenate([dV, self._zero_cols], axis=2),
+                    np.concatenate([dV_rate, self._zero_cols], axis=2))
         coef, coef_rate = self._known.copy(), np.zeros((self.m, S))
         for k, s in self._prismatic:
             coef[:, s] += q[k]
@@ -225,9 +227,9 @@ class KinematicRegressor:
         for k, s in self._prismatic:
             dW0[k] += V[s][:, None]
             dW0_rate[k] += V_dot[s][:, None]
-        return (np.vstack([V, coef @ V, self._one_row]),
-                np.concatenate([dV, dW0, self._zero_col], axis=2),
-                np.concatenate([dV_rate, dW0_rate, self._zero_col], axis=2))
+        return (np.vstack([V, coef @ V, self._last_rows]),
+                np.concatenate([dV, dW0, self._zero_cols], axis=2),
+                np.concatenate([dV_rate, dW0_rate, self._zero_cols], axis=2))
 
     # -- the full columns and their reduction --------------------------------------------
     def _columns(self):
@@ -255,41 +257,46 @@ class KinematicRegressor:
         self._z_cols, self._perp_cols = z_cols, perp_cols
         self.z_full_labels = tuple(c[3] for c in z_cols)
         self.perp_full_labels = tuple(c[3] for c in perp_cols)
-        self._one_row = np.ones((1, 3))
-        self._zero_col = np.zeros((self.n, 3, 1))
+        self._last_rows = np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])   # the 1 and the 0
+        self._zero_cols = np.zeros((self.n, 3, 2))
 
     def _indices(self, columns):
-        """Per (point, column) table rows and coordinates, and the point masks, (m, p) each."""
+        """Table row and coordinate of every (point, column) entry of H, (m, p) each.
+
+        An entry of a point the column does not involve reads the zero row, so the
+        gather itself yields H, dH and their rates (no mask to multiply).
+        """
         m, S = self.m, self.S
+        one = S + (m if self.has_w0 else 0)
         rows = np.empty((m, len(columns)), dtype=int)
+        coords = np.empty((m, len(columns)), dtype=int)
         for p, col in enumerate(columns):
-            row = col[0]
-            rows[:, p] = (S + np.arange(m) if row == _W0 else
-                          S + (m if self.has_w0 else 0) if row == _ONE else row)
-        coords = np.array([c[1][1] if isinstance(c[1], tuple) else c[1] for c in columns],
-                          dtype=int)
-        mask = np.array([c[2] for c in columns]).reshape(-1, m).T
-        return rows, np.broadcast_to(coords, rows.shape).copy(), mask
+            row, coord, mask = col[0], col[1], col[2]
+            rows[:, p] = (S + np.arange(m) if row == _W0 else one if row == _ONE else row)
+            coords[:, p] = coord[1] if isinstance(coord, tuple) else coord
+            rows[mask == 0.0, p] = one + 1
+        return rows, coords
 
     def _perp_gather(self, columns):
-        rows, comps, mask = self._indices(columns)
+        """Table row and coordinate of every (image row, column) entry of W, (2m, p) each.
+
+        Column (a, b) of point i has entries only in image row 2i + a; the rest read 0.
+        """
+        rows, comps = self._indices(columns)
         image_row = np.array([c[1][0] for c in columns], dtype=int)
-        select = (image_row[None, :] == np.arange(2)[:, None]).astype(float)   # (2, p)
-        factor = mask[:, None, None, :] * select[None, :, None, :]              # (m, 2, 1, p)
-        return rows, comps, factor
+        zero = self.S + (self.m if self.has_w0 else 0) + 1
+        wrows = np.repeat(rows, 2, axis=0)
+        wrows[np.arange(2 * self.m)[:, None] % 2 != image_row[None, :]] = zero
+        return wrows, np.repeat(comps, 2, axis=0)
 
     def _assemble(self, table, z_index, perp_index):
         """(H, dH, dH_rate, W, W_rate) of the columns ``z_index``/``perp_index`` from the table."""
         V, dV, dV_rate = table
-        zr, zc, zmask = z_index
-        pr, pc, factor = perp_index
-        H = V[zr, zc] * zmask
-        dH = dV[:, zc, zr].transpose(1, 0, 2) * zmask[:, None, :]
-        dH_rate = dV_rate[:, zc, zr].transpose(1, 0, 2) * zmask[:, None, :]
-        shape = (2 * self.m, self.n, factor.shape[-1])
-        W = (dV[:, pc, pr].transpose(1, 0, 2)[:, None] * factor).reshape(shape)
-        W_rate = (dV_rate[:, pc, pr].transpose(1, 0, 2)[:, None] * factor).reshape(shape)
-        return H, dH, dH_rate, W, W_rate
+        zr, zc = z_index
+        pr, pc = perp_index
+        return (V[zr, zc], dV[:, zc, zr].transpose(1, 0, 2),
+                dV_rate[:, zc, zr].transpose(1, 0, 2), dV[:, pc, pr].transpose(1, 0, 2),
+                dV_rate[:, pc, pr].transpose(1, 0, 2))
 
     def _sample_configurations(self):
         rng = np.random.default_rng(0)
