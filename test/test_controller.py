@@ -133,3 +133,27 @@ def test_alpha_at_or_below_gamma_over_3_is_refused(scenario):
     c = scenario.controller
     with pytest.raises(ConfigError, match="alpha > gamma/3"):
         Gains(c.K, 1.0, 3.0, c.Gamma_d, c.Gamma_z_perp, c.Gamma_z)
+
+
+def test_joint_damping_keeps_v1_rate_and_v2(scenario):
+    """With tau -= D s (joint_damping), dV1/dt = -s'(J*'KJ*s + D s) and V2 still follows eq (32).
+
+    D is a constant symmetric positive definite matrix (a scaled inertia matrix here);
+    the proof's V2 argument only needs the L2 bound on J*s that V1 gives, unchanged.
+    """
+    from dataclasses import replace
+
+    model, gains, traj, state0 = paper_setup(scenario, obs_offset=(3.0, -2.0))
+    D = 5.0 * model.mass_matrix(Q0)
+    damped = replace(gains, D=D)
+    rows, extra = [], []
+    simulate_continuous(model, damped, traj, Q0, np.zeros(3), state0, 1e-4, 2000,
+                        lambda t, y, out, x, d: (rows.append(lyapunov_terms(model, damped, y,
+                                                                            out, x, d)),
+                                                 extra.append(-out.s @ D @ out.s)))
+    rows, dt = np.array(rows), 1e-4
+    V1, V1_rate = rows[:, 0], rows[:, 2] + np.array(extra)
+    assert np.all(np.diff(V1) <= 1e-9 * V1[0]) and V1[0] - V1[-1] > 1e-3 * V1[0]
+    np.testing.assert_allclose(V1 - V1[0], cumtrapz(V1_rate, dt), atol=1e-5 * V1[0])
+    V2 = rows[:, 1] - cumtrapz(rows[:, 3], dt)
+    np.testing.assert_allclose(V2 - V2[0], cumtrapz(rows[:, 4], dt), atol=1e-5 * V2[0])

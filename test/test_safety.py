@@ -339,3 +339,41 @@ def test_simulator_refuses_bad_commands_and_applies_zero(scenario):
         assert sim.apply([1.0, 0.0, 0.0]) is None
     finally:
         sim.close()
+
+
+def test_joint_damping_is_the_estimated_inertia_at_the_start_and_damps_the_fallback():
+    half = [0.5 * v for v in load_scenario(PAPER_CONFIG).controller.model.a_d]
+    ctl = controller(**{"joint_damping.inertia_rate": 20.0, "safety.hold_time": 0.0,
+                        "safety.fallback_damping": 1.0, "a_d_init": half})
+    plain = controller(**{"safety.hold_time": 0.0, "a_d_init": half})
+    q1 = Q0 + np.array([0.1, -0.05, 0.02])
+    qd = np.array([0.3, -0.2, 0.1])
+    res = ctl.step(0.0, q1, qd, measure(ctl, q1))
+    ref = plain.step(0.0, q1, qd, measure(plain, q1))
+    D = ctl.gains.D
+    np.testing.assert_allclose(D, 20.0 * ctl.model.estimated_mass_matrix(q1, ctl.state.a_d),
+                               rtol=1e-9)
+    # the law: the paper's torque minus D s, with s = q_dot - q_dot_r of eq (20)
+    xd, xd_dot, xd_ddot = ctl.desired(0.0)
+    out = control_law(ctl.model, plain.gains, ctl.state, q1, qd, measure(ctl, q1), xd, xd_dot,
+                      xd_ddot, None, ctl.config["min_singular_value"])
+    np.testing.assert_allclose(res.tau, ref.tau - D @ out.s, rtol=1e-9, atol=1e-9)
+    fallback = ctl.step(0.2, q1, qd, None)
+    assert fallback.status == "fallback"
+    zero = np.zeros(3)
+    g_hat = ctl.model.dynamic_regressor(q1, zero, zero, zero) @ ctl.state.a_d
+    np.testing.assert_allclose(fallback.tau, g_hat - 1.0 * qd - D @ qd, rtol=1e-12)
+
+
+def test_joint_damping_is_off_when_the_inertia_estimate_is_zero(caplog):
+    ctl = controller(**{"joint_damping.inertia_rate": 20.0})    # the paper's a_d guess: no inertia
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    assert ctl.gains.D is None
+    assert "not positive definite" in caplog.text
+
+
+def test_estimated_mass_matrix_from_the_regressor_is_the_models(scenario):
+    model = scenario.controller.model
+    for q in (Q0, Q0 + 0.3):
+        np.testing.assert_allclose(model.estimated_mass_matrix(q, model.a_d),
+                                   model.mass_matrix(q), rtol=1e-12, atol=1e-12)

@@ -318,8 +318,8 @@ CONTROLLER_PARAMS = (
               "When a stale camera comes back, blend the offset between the measured feature and "
               "x_d out over this time [s].", 0.0, 60.0, True),
     ParamSpec("safety.fallback", "gravity_compensation", "str",
-              "After hold_time: gravity_compensation (estimated g(q) - D q_dot) or zero_torque.",
-              runtime=True),
+              "After hold_time: gravity_compensation (estimated g(q), damped by "
+              "fallback_damping and the joint_damping matrix) or zero_torque.", runtime=True),
     ParamSpec("safety.fallback_damping", 5.0, "float",
               "Joint damping D of the gravity-compensation fallback [N m s/rad].", 0.0, None,
               True),
@@ -558,7 +558,7 @@ def _check_image_bounds(v, section):
     u0, u1, v0, v1 = v["image_bounds"]
     if not (u0 < u1 and v0 < v1):
         raise ConfigError(f"{section}.image_bounds: needs u_min < u_max and v_min < v_max, "
-                          f"got {list(v['image_bounds'])}")
+                          f"got {v['image_bounds'].tolist()}")
 
 
 def build_controller_model(values, section=CONTROLLER_SECTION, search_dirs=(), model=None):
@@ -815,7 +815,7 @@ def check_start(sim, ctrl):
         if outside:
             raise ConfigError(f"sim_node.initial_positions: feature point(s) {outside} outside "
                               f"the image at the start (pixels {np.round(pixels, 1).tolist()}, "
-                              f"{section} {list(bounds)})")
+                              f"{section} {[float(b) for b in bounds]})")
     model = ctrl.model
     tensors = model.kinematic_tensors(q0, np.zeros(model.n))
     _, dH, _, W, _ = tensors

@@ -501,7 +501,7 @@ class AdaptiveVisualTracker:
                    if not (u0 <= u <= u1 and v0 <= v <= v1)]
         if outside:
             raise InputError(f"feature x: point(s) {outside} outside the "
-                             f"image bounds {list(self.config.image_bounds)}: {pixels}")
+                             f"image bounds {self.config.image_bounds.tolist()}: {pixels}")
         return x
 
     def step(self, t, q, qd, x=None, x_stamp=None):
@@ -534,6 +534,8 @@ class AdaptiveVisualTracker:
             qd = validate_vector("joint velocities qd", qd, n)
         except InputError as exc:
             return self._reject(t, None, None, [str(exc)])
+        if self.damping is None:
+            self._fix_damping(q)
         problems, frame, stamp = [], None, t
         if x is None and not self.compensate:
             problems.append("feature x: missing")
@@ -619,8 +621,6 @@ class AdaptiveVisualTracker:
     def _sample(self, t, q, qd, x, tensors, with_frame):
         """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit."""
         restarting = self.t_last is None or self.stale
-        if self.damping is None:
-            self._fix_damping(q)
         if restarting:
             state = replace(self.state, x_obs=x.copy())
             blend = (self.config.start_blend_time if self.t_last is None
@@ -669,7 +669,7 @@ class AdaptiveVisualTracker:
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
 
     def _fix_damping(self, q):
-        """D = c M_hat(q0) + diag(d) from ``joint_damping.*``, at the first joint sample.
+        """D = c M_hat(q0) + diag(d) from ``joint_damping.*``, at the first valid joint sample.
 
         M_hat is the inertia matrix of the initial dynamic estimate at the start pose
         (from the model's own regressor), made positive definite (eigenvalues floored
@@ -682,10 +682,12 @@ class AdaptiveVisualTracker:
         if c > 0.0:
             M_hat = self.model.estimated_mass_matrix(q, self.state.a_d)
             w, V = np.linalg.eigh(0.5 * (M_hat + M_hat.T))
-            if w[0] <= 1e-6 * w[-1]:
+            if w[0] <= 1e-6 * max(w[-1], 0.0):
                 log.warning("joint_damping: the initial dynamic estimate's inertia matrix is not "
-                            "positive definite at the start (eigenvalues %s); floored", w)
-            D = D + c * (V * np.maximum(w, 1e-6 * w[-1])) @ V.T
+                            "positive definite at the start (eigenvalues %s); %s", w,
+                            "floored" if w[-1] > 0.0 else "the inertia-shaped damping is off")
+            if w[-1] > 0.0:
+                D = D + c * (V * np.maximum(w, 1e-6 * w[-1])) @ V.T
         self.damping = D
         if np.any(D):
             self.gains = replace(self.gains, D=D)
@@ -719,13 +721,20 @@ class AdaptiveVisualTracker:
                           self.state, status, tuple(problems))
 
     def fallback_torque(self, q, qd):
-        """Safe torque when no valid control can be computed."""
+        """Safe torque when no valid control can be computed.
+
+        tau = g_hat(q) - (D + d I) q_dot: the estimated gravity, the joint-space damping D
+        of ``joint_damping.*`` (shaped by the arm's inertia, so it is stable on a light
+        wrist too) and ``safety.fallback_damping`` d.
+        """
         n = self.model.n
         if q is None or qd is None or self.config["safety.fallback"] == "zero_torque":
             return np.zeros(n)
         zero = np.zeros(n)
         g_hat = self.model.dynamic_regressor(q, zero, zero, zero) @ self.state.a_d
         tau = g_hat - self.config["safety.fallback_damping"] * qd
+        if self.gains.D is not None:
+            tau = tau - self.gains.D.dot(qd)
         return np.clip(tau, -self.config.torque_limit, self.config.torque_limit)
 
 
