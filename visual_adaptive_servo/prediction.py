@@ -52,7 +52,6 @@ effect of each):
 from __future__ import annotations
 
 import bisect
-from collections import deque
 
 import numpy as np
 
@@ -77,9 +76,11 @@ class FramePredictor:
         self.gain = float(gain)
         self.drift_gain = float(drift_gain)
         self.drift = 0.0            # b, (2m,) once a frame has been applied twice
-        self.times = deque()        # joint-sample times, increasing
-        self.rates = deque()        # (J_perp q_dot, Z_dot, Z) per sample, (3, 2m)
-        self.history = deque()      # x_hat at each sample (None before the first frame)
+        # lists, not deques: a late frame needs random access (bisect, slices); the front is
+        # cut in batches (_trim), so appending stays O(1) amortised
+        self.times = []             # joint-sample times, increasing
+        self.rates = []             # (J_perp q_dot, Z_dot, Z) per sample, (3, 2m)
+        self.history = []           # x_hat at each sample (None before the first frame)
         self.last_stamp = None      # capture time of the last applied frame
 
     def reset(self):
@@ -139,14 +140,20 @@ class FramePredictor:
             prior = self._advance(prior, stamp - self.times[i], self.rates[i])
         self._learn_drift(prior, x_frame, stamp)
         x = self._blend(prior, x_frame)
-        tau = stamp
-        for k in range(i, len(self.times)):
-            t_next = self.times[k + 1] if k + 1 < len(self.times) else t
-            x = self._advance(x, t_next - tau, self.rates[k])
-            if k + 1 < len(self.times):
-                self.history[k + 1] = x
-            tau = t_next
-        return x
+        # the Euler steps x_{k+1} = x_k + dt_k (jq_k - x_k z_dot_k) / z_k + dt_k b are affine,
+        # x_{k+1} = a_k x_k + c_k: with P_k the running product of the a_k, every step of
+        # the re-run is x_k = P_k (x + sum_{j<k} c_j / P_{j+1}) -- a few array operations
+        # instead of a Python loop over the buffer (~2 us a sample)
+        times = self.times[i:] + [t]
+        dt = np.diff(times)
+        dt[0] = times[1] - stamp
+        jq, z_dot, z = np.stack(self.rates[i:], axis=1)
+        a = 1.0 - dt[:, None] * z_dot / z
+        c = dt[:, None] * (jq / z + self.drift)
+        P = np.cumprod(a, axis=0)
+        steps = P * (x + np.cumsum(c / P, axis=0))                 # x at times[1:]
+        self.history[i + 1:] = list(steps[:-1])
+        return steps[-1]
 
     def _learn_drift(self, prior, x_frame, stamp):
         if self.drift_gain > 0.0 and prior is not None and self.last_stamp is not None:
@@ -165,11 +172,14 @@ class FramePredictor:
         the estimates used at t.  ``applied_stamp``: the frame applied at this sample.
         """
         self.times.append(t)
-        self.rates.append(rate)
+        self.rates.append(np.array(rate))       # one (3, 2m) array: stacking a re-run is cheap
         self.history.append(x_hat)
         if applied_stamp is not None:
             self.last_stamp = applied_stamp
-        while t - self.times[0] > self.horizon + TIME_EPS:
-            self.times.popleft()
-            self.rates.popleft()
-            self.history.popleft()
+        if t - self.times[0] > 1.5 * self.horizon:
+            self._trim(t)
+
+    def _trim(self, t):
+        """Drop the samples older than the horizon (keeping one at or before it)."""
+        first = max(bisect.bisect_left(self.times, t - self.horizon - TIME_EPS) - 1, 0)
+        del self.times[:first], self.rates[:first], self.history[:first]
