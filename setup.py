@@ -30,6 +30,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/campaigns", glob("config/campaigns/*.yaml")),
         ("share/" + package_name + "/urdf", glob("sim_bridge/urdf/*.urdf")),
     ],
     python_requires=">=3.10",
