@@ -43,8 +43,10 @@ setup(
         "rosbags>=0.10.4",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
+    # ray: `vas campaign --ray` (imported only then)
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
-                             "flake8-comprehensions", "flake8-quotes", "flake8-import-order"]},
+                             "flake8-comprehensions", "flake8-quotes", "flake8-import-order"],
+                    "ray": ["ray>=2.9"]},
     zip_safe=True,
     maintainer="visual_adaptive_servo maintainers",
     maintainer_email="maintainers@users.noreply.h-seed-00a3853d.example",
