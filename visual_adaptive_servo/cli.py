@@ -26,6 +26,7 @@ import json
 import logging
 import sys
 
+from .campaign import add_parser as add_campaign_parser
 from .compare import add_parser as add_compare_parser
 from .compare import CONTROLLER_NAMES, controller_factory
 from .config import ConfigError, load_scenario
@@ -127,6 +128,7 @@ def build_parser():
     rob.add_argument("--duration", type=float, default=10.0, help="simulated seconds per case")
     rob.set_defaults(func=cmd_robustness)
     add_compare_parser(sub)
+    add_campaign_parser(sub)
     return parser
 
 
