@@ -63,6 +63,11 @@ SMALL = """\
       - {{name: noisy, pixel_noise: 0.3, seed: 7}}
     grid:
       controller: [observer, velocity-lp]
+    random:
+      runs: 1
+      seed: 3
+      factors:
+        estimate_scale.a_z: {{log_uniform: [0.7, 1.4]}}
 """
 
 
@@ -298,7 +303,7 @@ def test_rows_repeat_exactly_and_their_commands_reproduce_them(tmp_path):
     again = read_rows(str(tmp_path / "b" / CSV_NAME), load_spec(spec))
     assert figures_of(rows) == figures_of(again)
     for name in ("summary.md", "summary.json", "error_histogram.png",
-                 "error_vs_controller.png"):
+                 "error_vs_controller.png", "error_vs_estimate_scale.a_z.png"):
         assert os.path.exists(tmp_path / "a" / name), name
     # an offset start with a baseline: the row's command, run by vas in its own process
     row = next(r for r in rows if r["factors"]["case"] == "offset"
