@@ -278,7 +278,8 @@ class RayCluster:
 
     ``ray.init()`` with no address starts a local Ray instance (or joins the one
     RAY_ADDRESS names); ``ray.init(address=...)`` joins a running cluster, whose
-    nodes must have this package installed.  At most ``workers`` runs (default:
+    nodes must have this package installed (and, with Ray's token authentication,
+    the driver RAY_AUTH_MODE=token and the cluster's token).  At most ``workers`` runs (default:
     the cluster's CPUs) are in flight, so Ctrl-C has little to cancel.
     """
 
@@ -295,7 +296,11 @@ class RayCluster:
             else:
                 ray.init(address=address, **options)
         except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise CampaignError(f"--ray {address}: cannot start or join Ray: {exc}") from None
+            hint = ("" if address == "auto" else " (a cluster with token authentication, the "
+                    "default from Ray 2.59 on, also needs RAY_AUTH_MODE=token and its token "
+                    "in this environment)")
+            raise CampaignError(f"--ray {address}: cannot start or join Ray: {exc}{hint}") \
+                from None
         self.size = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
         self.run_fn = run_fn
         # retries are counted by _Attempts, so Ray's own (3 by default) are off
