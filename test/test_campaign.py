@@ -26,6 +26,7 @@ import os
 import re
 import shlex
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -386,6 +387,15 @@ def test_ray_missing_is_said_plainly(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)       # import ray -> ImportError
     with pytest.raises(CampaignError, match=re.escape(RAY_MISSING)):
         RayCluster("auto")
+
+
+def test_ray_address_where_nothing_listens_is_refused_at_once():
+    pytest.importorskip("ray", reason="Ray is an optional extra: pip install '.[ray]'")
+    with socket.socket() as probe:      # a port that was free a moment ago
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(CampaignError, match=f"--ray 127.0.0.1:{port}: no Ray cluster answers"):
+        RayCluster(f"127.0.0.1:{port}")
 
 
 def test_ray_gives_the_same_rows_as_the_process_pool(tmp_path):

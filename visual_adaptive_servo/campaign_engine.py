@@ -40,6 +40,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import socket
 import tempfile
 import time
 from collections import deque
@@ -273,14 +274,26 @@ class ProcessPool:
         self.workers = []
 
 
+def _check_reachable(address, timeout=5.0):
+    """Refuse a ``host:port`` nothing listens on (ray.init would wait there for minutes)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        return      # another form of address: Ray judges it
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise CampaignError(f"--ray {address}: no Ray cluster answers there ({exc})") from None
+
+
 class RayCluster:
     """The same runs as Ray tasks: ``address`` ``auto`` starts Ray here, else joins it.
 
-    ``ray.init()`` with no address starts a local Ray instance (or joins the one
-    RAY_ADDRESS names); ``ray.init(address=...)`` joins a running cluster, whose
-    nodes must have this package installed (and, with Ray's token authentication,
-    the driver RAY_AUTH_MODE=token and the cluster's token).  At most ``workers`` runs (default:
-    the cluster's CPUs) are in flight, so Ctrl-C has little to cancel.
+    ``auto`` joins the cluster RAY_ADDRESS names, else starts a new Ray instance on
+    this machine (``ray.init(address="local")``); any other address is joined with
+    ``ray.init(address=...)``: its nodes must have this package installed (and, with
+    Ray's token authentication, the driver RAY_AUTH_MODE=token and the cluster's token).
+    At most ``workers`` runs (default: the cluster's CPUs) are in flight, so Ctrl-C
+    has little to cancel.
     """
 
     def __init__(self, address, workers=None, run_fn=execute_run):
@@ -289,12 +302,17 @@ class RayCluster:
         except ImportError:
             raise CampaignError(RAY_MISSING) from None
         self.ray = ray
+        if address != "auto":
+            _check_reachable(address)
         options = {"include_dashboard": False, "log_to_driver": False}
+        if address == "auto":
+            # ray.init() with no address would also try the last `ray start` of this
+            # machine (/tmp/ray/ray_current_cluster) and wait there if it is gone
+            address_to_join = os.environ.get("RAY_ADDRESS") or "local"
+        else:
+            address_to_join = address
         try:
-            if address == "auto":
-                ray.init(**options)
-            else:
-                ray.init(address=address, **options)
+            ray.init(address=address_to_join, **options)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             hint = ("" if address == "auto" else " (a cluster with token authentication, the "
                     "default from Ray 2.59 on, also needs RAY_AUTH_MODE=token and its token "
