@@ -25,6 +25,7 @@ import math
 import os
 import re
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
@@ -381,6 +382,21 @@ def test_a_worker_killed_mid_run_is_replaced_and_the_run_retried(tmp_path):
     assert killed and sorted(rows) == [0, 1, 2, 3]
     assert all(r["status"] == "finished" for r in rows.values())
     assert [rows[i]["attempts"] for i in range(4)] == [1, 2, 1, 1]
+
+
+def test_workers_import_this_package_whatever_the_working_directory(tmp_path):
+    # vas run from inside another checkout: its package must not reach the workers
+    vas = shutil.which("vas", path=os.path.dirname(sys.executable)) or shutil.which("vas")
+    if vas is None:
+        pytest.skip("the vas command is not installed")
+    decoy = tmp_path / "visual_adaptive_servo"
+    decoy.mkdir()
+    (decoy / "__init__.py").write_text("raise RuntimeError('the decoy package was imported')\n")
+    spec = small_spec(str(tmp_path))
+    subprocess.run([vas, "campaign", "--spec", spec, "--out", "out", "--workers", "2",
+                    "--runs", "2"], cwd=tmp_path, check=True, capture_output=True)
+    rows = read_rows(str(tmp_path / "out" / CSV_NAME), load_spec(spec))
+    assert [(r["status"], r["reason"]) for r in rows] == [("finished", "")] * 2
 
 
 def test_ray_missing_is_said_plainly(monkeypatch):

@@ -191,8 +191,8 @@ def run_campaign(spec_path, out_dir, workers=None, ray=None, limit=None, run_fn=
                  progress=None, on_start=None, on_row=None):
     """Run (or resume) a campaign and write its report; return the summary dict.
 
-    The pool's workers are spawned: a script that calls this needs the usual
-    ``if __name__ == "__main__":`` guard.
+    The pool's workers start from a fresh interpreter (a fork server): a script that
+    calls this needs the usual ``if __name__ == "__main__":`` guard.
 
     Parameters
     ----------

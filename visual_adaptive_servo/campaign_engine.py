@@ -28,9 +28,11 @@ they end.  The run function (default :func:`execute_run`) is injectable.
 
 :class:`ProcessPool` keeps one pipe per worker, so the parent always knows which
 run each worker holds and which run a dead worker took with it (a
-``concurrent.futures`` pool declares itself broken instead).  Workers start with
-``spawn``: nothing of the parent's state (open files, a PyBullet connection) is
-inherited, and the ~0.3 s start-up (numpy, PyBullet) is paid once per worker.
+``concurrent.futures`` pool declares itself broken instead).  Workers are forked
+from a fork server (``multiprocessing`` ``forkserver``) that has imported numpy,
+PyBullet and the controllers once: nothing of the parent's state (open files, a
+PyBullet connection, threads) is inherited, and the ~0.3-0.5 s of imports is paid
+once per campaign, not once per worker or per replacement of a dead one.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from multiprocessing.connection import wait
 FIGURES = ("diverged", "final_rms_error_px", "final_rms_true_error_px", "max_error_px",
            "max_true_error_px", "max_abs_torque")
 MAX_ATTEMPTS = 2
+PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RAY_MISSING = ("--ray needs Ray, an optional extra: pip install 'visual_adaptive_servo[ray]' "
                "(or pip install ray)")
 
@@ -142,9 +145,10 @@ class _Attempts:
         return False
 
 
-def _worker_main(conn, run_fn, log_path):
+def _worker_main(conn, run_fn, log_path, cwd):
     """A pool worker: run what the parent sends until it sends None or goes away."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the parent's to handle
+    os.chdir(cwd)       # the parent's, not the one it started this worker from
     if log_path is not None:
         # the terminal is the parent's progress bar: PyBullet's banner, a crash's
         # traceback (faulthandler) and log lines go to the log file instead
@@ -188,8 +192,12 @@ class ProcessPool:
         self.size = workers
         self.run_fn = run_fn
         self.on_start = on_start
-        self.log_path = log_path
-        self.context = multiprocessing.get_context("spawn")
+        self.log_path = None if log_path is None else os.path.abspath(log_path)
+        self.context = multiprocessing.get_context("forkserver")
+        # the fork server imports these once; each worker forked from it starts in
+        # milliseconds instead of importing numpy, PyBullet and the controllers again
+        self.context.set_forkserver_preload([f"{__package__}.runner",
+                                             f"{__package__}.baselines"])
         self.workers = []
 
     @property
@@ -199,10 +207,19 @@ class ProcessPool:
 
     def _spawn(self):
         parent, child = self.context.Pipe()
+        cwd = os.getcwd()
         process = self.context.Process(target=_worker_main,
-                                       args=(child, self.run_fn, self.log_path),
+                                       args=(child, self.run_fn, self.log_path, cwd),
                                        daemon=True, name="vas-campaign-worker")
-        process.start()
+        # the fork server (started by the first start()) has '' -- the working
+        # directory -- first on sys.path and (Python 3.11) imports its preload before
+        # taking the parent's sys.path: from the folder that holds this package, ''
+        # can only find this very package, never another checkout where vas was run
+        os.chdir(PACKAGE_PARENT)
+        try:
+            process.start()
+        finally:
+            os.chdir(cwd)
         child.close()
         return _Worker(process, parent)
 
