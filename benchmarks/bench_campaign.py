@@ -29,8 +29,10 @@ The goal is a runs-phase ratio 2 workers / 1 worker >= 1.7 on 2 cores.  Other
 processes on the machine take their share, so two load-independent figures are
 recorded with it:
 
-* ``cpu share``: CPU seconds of the workers / runs-phase wall seconds, the cores
-  the campaign actually got (at most 1 with one worker, 2 with two);
+* ``cpu share``: CPU seconds the workers spent in runs / runs-phase wall seconds,
+  the cores the campaign actually got (at most 1 with one worker, 2 with two);
+* ``CPU s per run``: the same per run, which stays put when the runs of two
+  workers do not slow each other down;
 * ``busy``: the summed wall time of the runs inside the workers / (workers x
   runs-phase wall time), the fraction of the phase the workers spent in runs
   (the rest is worker start-up and the parent's bookkeeping).
@@ -45,9 +47,7 @@ Prints a markdown table and writes benchmarks/results/campaign.json.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
-import resource
 import statistics
 import tempfile
 import time
@@ -55,6 +55,7 @@ import time
 from benchlib import environment, write_result
 
 from visual_adaptive_servo.campaign import run_campaign
+from visual_adaptive_servo.campaign_engine import execute_run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results", "campaign.json")
@@ -68,25 +69,31 @@ grid:
 """
 
 
-def children_cpu():
-    """CPU seconds of this process's reaped children (the workers, once joined)."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
+def timed_run(run):
+    """:func:`execute_run` plus the CPU seconds the worker spent on it (``cpu_s``)."""
+    start = time.process_time()
+    figures = execute_run(run)
+    return {**figures, "cpu_s": time.process_time() - start}
 
 
 def time_campaign(spec, folder, workers):
     """One campaign into ``folder``: runs/s (runs phase, whole call), cpu share, busy."""
-    cpu0, start = children_cpu(), time.perf_counter()
-    summary = run_campaign(spec, folder, workers=workers, progress=False)
+    cpu, in_runs = [], []
+
+    def collect(result):
+        cpu.append(result.figures["cpu_s"])
+        in_runs.append(result.wall_time_s)
+
+    start = time.perf_counter()
+    summary = run_campaign(spec, folder, workers=workers, progress=False, run_fn=timed_run,
+                           on_row=collect)
     whole = time.perf_counter() - start
-    cpu = children_cpu() - cpu0
     if summary["finished"] != summary["runs_in_spec"]:
         raise RuntimeError(f"{folder}: not every run finished: {summary['failed_runs']}")
-    with open(os.path.join(folder, "runs.csv"), encoding="utf-8", newline="") as handle:
-        in_runs = sum(float(row["wall_time_s"]) for row in csv.DictReader(handle))
     phase = summary["wall_time_s"]
     return {"runs": summary["rows"] / phase, "whole": summary["rows"] / whole,
-            "cpu_share": cpu / phase, "busy": in_runs / (workers * phase)}
+            "cpu_share": sum(cpu) / phase, "busy": sum(in_runs) / (workers * phase),
+            "cpu_per_run": sum(cpu) / len(cpu)}
 
 
 def main(argv=None):
@@ -95,7 +102,7 @@ def main(argv=None):
                         help="simulated seconds per run")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
-    keys = ("runs", "whole", "cpu_share", "busy")
+    keys = ("runs", "whole", "cpu_share", "busy", "cpu_per_run")
     figures = {w: {k: [] for k in keys} for w in (1, 2)}
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
@@ -109,18 +116,20 @@ def main(argv=None):
                     figures[workers][key].append(got[key])
                 print(f"repeat {rep + 1}, {workers} worker(s): {got['runs']:.3f} runs/s "
                       f"(runs phase), {got['whole']:.3f} runs/s (whole call), cpu share "
-                      f"{got['cpu_share']:.2f}, busy {got['busy']:.2f}, load "
+                      f"{got['cpu_share']:.2f}, busy {got['busy']:.2f}, CPU s per run "
+                      f"{got['cpu_per_run']:.2f}, load "
                       f"{os.getloadavg()[0]:.1f}")
     median = {w: {k: statistics.median(v) for k, v in f.items()} for w, f in figures.items()}
     ratio = {k: median[2][k] / median[1][k] for k in ("runs", "whole")}
     print(f"\n8 runs of {args.duration:g} s simulated, median of {args.repeats}\n")
-    print("| workers | runs/s, runs phase | runs/s, whole call | cpu share [cores] | busy |")
-    print("|---:|---:|---:|---:|---:|")
+    print("| workers | runs/s, runs phase | runs/s, whole call | cpu share [cores] | busy "
+          "| CPU s per run |")
+    print("|---:|---:|---:|---:|---:|---:|")
     for workers in (1, 2):
         m = median[workers]
         print(f"| {workers} | {m['runs']:.3f} | {m['whole']:.3f} | {m['cpu_share']:.2f} "
-              f"| {m['busy']:.2f} |")
-    print(f"| ratio 2/1 | {ratio['runs']:.2f} (goal >= 1.7) | {ratio['whole']:.2f} | | |")
+              f"| {m['busy']:.2f} | {m['cpu_per_run']:.2f} |")
+    print(f"| ratio 2/1 | {ratio['runs']:.2f} (goal >= 1.7) | {ratio['whole']:.2f} | | | |")
     write_result(RESULTS, {
         "benchmark": "campaign throughput, 8 runs, 1 vs 2 worker processes",
         "runs": 8, "duration_s": args.duration, "repeats": args.repeats,
