@@ -155,10 +155,12 @@ def _worker_main(conn, run_fn, log_path, cwd):
         log = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         os.dup2(log, 1)
         os.dup2(log, 2)
+        os.close(log)
         faulthandler.enable()
     logging.basicConfig(level=logging.WARNING,
                         format=f"worker {os.getpid()} %(levelname)s %(name)s: %(message)s")
-    # numpy, PyBullet and the controllers are imported now, not inside a run's wall time
+    # numpy, PyBullet and the controllers before the first run's clock starts (a no-op
+    # when the fork server preloaded them)
     from . import baselines, runner  # noqa: F401
     while True:
         try:
@@ -199,11 +201,6 @@ class ProcessPool:
         self.context.set_forkserver_preload([f"{__package__}.runner",
                                              f"{__package__}.baselines"])
         self.workers = []
-
-    @property
-    def running(self):
-        """{run id: worker pid} of the runs being executed now."""
-        return {w.run.index: w.process.pid for w in self.workers if w.run is not None}
 
     def _spawn(self):
         parent, child = self.context.Pipe()
@@ -246,7 +243,7 @@ class ProcessPool:
     def _service(self, w, queue, attempts):
         """Read what worker ``w`` sent; if it died, retry or fail its run and replace it."""
         alive = True
-        while alive and w.conn.poll():
+        while w.conn.poll():
             try:
                 message = w.conn.recv()
             except (EOFError, OSError):
