@@ -23,6 +23,7 @@
 """
 
 import functools
+import os
 
 import numpy as np
 import pytest
@@ -117,3 +118,36 @@ def test_vas_compare_is_registered():
 
     args = build_parser().parse_args(["compare", "--out", "x", "--duration", "5"])
     assert args.command == "compare" and args.duration == 5.0 and args.transient == 5.0
+
+
+def test_controller_names_are_the_compared_controllers():
+    from visual_adaptive_servo.compare import CONTROLLER_NAMES, controller_factory, controllers
+
+    assert CONTROLLER_NAMES == tuple(name for name, _, _ in controllers())
+
+    def same(f, g):     # controllers() builds new partials on every call
+        return (getattr(f, "func", f), getattr(f, "keywords", {})) == (
+            getattr(g, "func", g), getattr(g, "keywords", {}))
+
+    assert all(same(controller_factory(name), factory) for name, _, factory in controllers())
+    with pytest.raises(ValueError, match=r"controller: must be one of \['observer'"):
+        controller_factory("pid")
+
+
+def test_vas_run_controller_runs_that_baseline(scenario, tmp_path):
+    import json
+
+    from visual_adaptive_servo.cli import main
+
+    config = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                          "config", "paper_3dof.yaml")
+    assert main(["run", "--config", config, "--duration", "0.5", "--controller", "velocity-lp",
+                 "--out", str(tmp_path / "cli"), "--no-bag", "--no-progress"]) == 0
+    with open(tmp_path / "cli" / "summary.json", encoding="utf-8") as handle:
+        cli = json.load(handle)
+    direct = run_scenario(scenario, str(tmp_path / "direct"), duration=0.5, progress=False,
+                          record=False, plots=False,
+                          controller_factory=functools.partial(
+                              VelocityAdaptiveTracker, filter_time=0.1, prediction_gain=1e-3))
+    assert cli["max_abs_torque"] == direct["max_abs_torque"]
+    assert cli["final_rms_error_px"] == direct["final_rms_error_px"]

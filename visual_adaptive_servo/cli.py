@@ -28,7 +28,9 @@ import json
 import logging
 import sys
 
+from .campaign import add_parser as add_campaign_parser
 from .compare import add_parser as add_compare_parser
+from .compare import CONTROLLER_NAMES, controller_factory
 from .config import ConfigError, load_scenario
 from .teach import add_parser as add_teach_parser
 
@@ -61,7 +63,8 @@ def cmd_run(args):
 
     scenario = load_scenario(args.config, _run_overrides(args))
     summary = run_scenario(scenario, args.out, duration=args.duration, progress=args.progress,
-                           record=not args.no_bag)
+                           record=not args.no_bag,
+                           controller_factory=controller_factory(args.controller))
     print(json.dumps({k: summary[k] for k in (
         "diverged", "final_rms_error_px", "max_error_px", "final_rms_true_error_px",
         "max_abs_torque", "final_depth_error", "sim_time_s", "wall_time_s", "realtime_factor")},
@@ -121,6 +124,9 @@ def build_parser():
     run.add_argument("--seed", type=int, help="noise seed")
     run.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE",
                      help="override a parameter, e.g. controller_node.alpha=12 (repeatable)")
+    run.add_argument("--controller", choices=CONTROLLER_NAMES, default=CONTROLLER_NAMES[0],
+                     help="the paper's observer-based controller (default) or a baseline of "
+                     "vas compare")
     run.add_argument("--no-bag", action="store_true", help="do not write run.mcap")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on a terminal)")
@@ -131,6 +137,7 @@ def build_parser():
     rob.set_defaults(func=cmd_robustness)
     add_compare_parser(sub)
     add_teach_parser(sub, _floats)
+    add_campaign_parser(sub)
     return parser
 
 

@@ -57,6 +57,8 @@ from dataclasses import dataclass
 import numpy as np
 
 PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# the names of controllers(), known without importing the controllers (vas start-up)
+CONTROLLER_NAMES = ("observer", "velocity-diff", "velocity-lp", "ibvs-calibrated")
 DEFAULT_CONFIGS = ("paper_3dof.yaml", "paper_3dof_noisy.yaml")
 TRANSIENT_S = 5.0
 LOW_PASS_S = 0.1
@@ -116,6 +118,16 @@ def controllers():
         ("ibvs-calibrated", "calibrated IBVS + computed torque (true camera and arm)",
          CalibratedIBVS),
     )
+
+
+def controller_factory(name):
+    """The factory of the controller called ``name`` (one of :data:`CONTROLLER_NAMES`)."""
+    from .config import ConfigError
+
+    for known, _, factory in controllers():
+        if known == name:
+            return factory
+    raise ConfigError(f"controller: must be one of {list(CONTROLLER_NAMES)}, got {name!r}")
 
 
 def read_timeseries(path):

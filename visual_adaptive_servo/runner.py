@@ -34,7 +34,6 @@ import numpy as np
 from sim_bridge.simulator import Simulator
 
 from .controller import AdaptiveVisualTracker
-from .plots import plot_run
 from .recording import McapRecorder, write_csv, write_json
 
 log = logging.getLogger(__name__)
@@ -307,6 +306,10 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
     write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"],
               ([float(v) for v in row] + [s] for row, s in zip(table, status)))
     if plots and len(data["t"]) > 1:
+        # matplotlib costs ~0.5 s to import: only runs that plot pay it (campaign workers
+        # and benchmarks run headless)
+        from .plots import plot_run
+
         labels = {"a_z_perp": model.a_z_perp_labels, "a_z": model.a_z_labels,
                   "a_d": model.a_d_labels}
         summary["outputs"] += [os.path.basename(p) for p in plot_run(data, out_dir, labels)]
