@@ -53,6 +53,7 @@ class Measurement:
     problems: tuple = ()
     image: np.ndarray | None = None  # rendered picture of the frame published now (rendered)
     frame_true_pixels: np.ndarray | None = None   # noiseless pixels at the frame's capture
+    true_q: np.ndarray | None = None  # the plant's joint positions (q may carry a fault)
 
 
 @dataclass(frozen=True)
@@ -166,7 +167,7 @@ class Simulator:
             if pixels is not None and self.faults.active("nan_pixels", frame.stamp):
                 pixels = np.full_like(pixels, np.nan)
         return Measurement(t, measured_q, qd, self.tau.copy(), stamp, pixels, true_depth,
-                           true_pixels, tuple(problems), image, frame_truth)
+                           true_pixels, tuple(problems), image, frame_truth, q)
 
     def _place_occluder(self, t):
         """In rendered mode, an occlusion window puts an opaque ball in front of point 1."""

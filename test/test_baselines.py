@@ -116,8 +116,10 @@ def test_compare_figures_on_a_known_signal():
 def test_vas_compare_is_registered():
     from visual_adaptive_servo.cli import build_parser
 
-    args = build_parser().parse_args(["compare", "--out", "x", "--duration", "5"])
-    assert args.command == "compare" and args.duration == 5.0 and args.transient == 5.0
+    args = build_parser().parse_args(["compare", "--out", "x", "--duration", "5",
+                                      "--workers", "2"])
+    assert args.command == "compare" and args.duration == 5.0 and args.workers == 2
+    assert args.spec.endswith("config/campaigns/compare.yaml")
 
 
 def test_controller_names_are_the_compared_controllers():

@@ -231,3 +231,14 @@ class CalibratedIBVS(AdaptiveVisualTracker):
     def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
         return ibvs_law(self.model, q, qd, x, xd, xd_dot, xd_ddot, self.ibvs_gains,
                         self.config["min_singular_value"], tensors)
+
+
+class FrameHoldingTracker(AdaptiveVisualTracker):
+    """The paper's controller without latency compensation (``vas compare``'s reference).
+
+    Each camera frame is taken as current when it arrives and the command is held
+    between frames: the controller as it ran once per frame, before the frame
+    predictor (``latency_compensation: false``).
+    """
+
+    compensates_latency = False

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import faulthandler
 import logging
+import math
 import multiprocessing
 import os
 import signal
@@ -50,7 +51,11 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 
 FIGURES = ("diverged", "final_rms_error_px", "final_rms_true_error_px", "max_error_px",
-           "max_true_error_px", "max_abs_torque")
+           "max_true_error_px", "max_abs_torque", "min_estimated_depth", "rejected", "fallback",
+           "frames_dropped", "sim_time_s",
+           # vas compare's figures over t >= 5 s (compare.run_figures, in summary.json)
+           "transient_rms_true_error_px", "transient_max_true_error_px", "torque_rms",
+           "torque_rate_rms")
 MAX_ATTEMPTS = 2
 PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RAY_MISSING = ("--ray needs Ray, an optional extra: pip install 'visual_adaptive_servo[ray]' "
@@ -77,21 +82,26 @@ class RunResult:
     wall_time_s: float
 
 
-def execute_run(run):
-    """The default run function: the run, headless; returns its :data:`FIGURES`."""
+def execute_run(run, keep_dir=None):
+    """The default run function: the run, headless; returns its :data:`FIGURES`.
+
+    ``keep_dir``: keep each run's timeseries.csv and summary.json in
+    ``keep_dir/<run index>`` (``vas compare`` plots from them); by default they go to
+    a scratch folder.
+    """
     from .compare import controller_factory
     from .config import load_scenario
     from .runner import run_scenario
 
     scenario = load_scenario(run.base, run.overrides)
     factory = controller_factory(run.controller)
-    # run_scenario always writes timeseries.csv and summary.json: into a scratch folder
     with tempfile.TemporaryDirectory(prefix="vas-campaign-") as scratch:
-        summary = run_scenario(scenario, scratch, duration=run.duration, progress=False,
+        out = scratch if keep_dir is None else os.path.join(keep_dir, f"{run.index:05d}")
+        summary = run_scenario(scenario, out, duration=run.duration, progress=False,
                                record=False, plots=False, controller_factory=factory)
     if summary.get("error"):
         raise RunFailed(summary["error"])
-    return {key: summary[key] for key in FIGURES}
+    return {key: summary.get(key, math.nan) for key in FIGURES}
 
 
 def describe(exc):

@@ -241,6 +241,36 @@ class CampaignSpec:
         return runs
 
 
+def derived_spec(path, out_path, duration=None, fixed=None):
+    """Write a copy of the spec at ``path`` with another duration / extra fixed factors.
+
+    Base configurations named relative to the original spec are made absolute, so the
+    copy (written to ``out_path``) names the same files.  Returns ``out_path``.
+    """
+    with open(path, encoding="utf-8") as handle:
+        body = yaml.safe_load(handle)
+    spec_dir = os.path.dirname(os.path.abspath(path))
+
+    def absolute(name):
+        candidate = os.path.join(spec_dir, name)
+        return os.path.abspath(candidate) if os.path.isfile(candidate) else name
+
+    body["base"] = absolute(body["base"])
+    for case in body.get("cases", ()):
+        if "base" in case:
+            case["base"] = absolute(case["base"])
+    if "base" in body.get("grid", {}):
+        body["grid"]["base"] = [absolute(b) for b in body["grid"]["base"]]
+    if duration is not None:
+        body["duration"] = float(duration)
+    if fixed:
+        body.setdefault("fixed", {}).update(fixed)
+    os.makedirs(os.path.dirname(os.path.abspath(out_path)), exist_ok=True)
+    with open(out_path, "w", encoding="utf-8") as handle:
+        yaml.safe_dump(body, handle, sort_keys=False)
+    return out_path
+
+
 def _fail(path, where, message):
     raise SpecError(f"{path}: {where}: {message}")
 
@@ -554,14 +584,17 @@ def _start_positions(factors, values, base, base_value):
     """Initial joint positions [rad] of the start_offset factors, and a problem or ''."""
     from .robustness import joints_seeing      # imports the simulator: only when needed
 
-    model = base.sim.model
+    model = base.controller.model              # with the simulator's ground truth
     key = f"{SIM_SECTION}.initial_positions"
     q = np.array(values.get(key, base_value(key)), dtype=float)
     if "start_offset_px" in factors:
-        traj = [np.asarray(values.get(f"{CONTROLLER_SECTION}.trajectory.{name}",
-                                      base_value(f"{CONTROLLER_SECTION}.trajectory.{name}")),
-                           dtype=float) for name in ("offset", "a_cos", "a_sin", "omega")]
-        x_start = SinusoidTrajectory(*traj[:3], float(traj[3]))(0.0)[0]
+        if base.controller["trajectory.type"] == "sinusoid":
+            traj = [np.asarray(values.get(f"{CONTROLLER_SECTION}.trajectory.{name}",
+                                          base_value(f"{CONTROLLER_SECTION}.trajectory.{name}")),
+                               dtype=float) for name in ("offset", "a_cos", "a_sin", "omega")]
+            x_start = SinusoidTrajectory(*traj[:3], float(traj[3]))(0.0)[0]
+        else:
+            x_start = base.controller.trajectory(0.0)[0]
         if "start_offset_angle_deg" in factors:
             angle = math.radians(factors["start_offset_angle_deg"])
             direction = np.array([math.cos(angle), math.sin(angle)])

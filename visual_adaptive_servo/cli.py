@@ -82,23 +82,16 @@ def cmd_run(args):
 def cmd_robustness(args):
     import os
 
-    from .recording import write_json
-    from .robustness import CASES, markdown_table, run_case
+    from .robustness import markdown_table, outside_bounds, run_matrix
 
-    os.makedirs(args.out, exist_ok=True)
-    results = []
-    for i, case in enumerate(CASES):
-        print(f"[{i + 1}/{len(CASES)}] {case.name}", file=sys.stderr)
-        results.append((case, run_case(case, os.path.join(args.out, f"case{i:02d}"),
-                                       args.duration)))
-    table = markdown_table(results)
+    rows = run_matrix(args.out, args.workers, args.ray, args.duration, args.progress)
+    table = markdown_table(rows)
+    title = (f"{args.duration:g} s per case" if args.duration
+             else "config/campaigns/robustness.yaml, 10 s per case")
     with open(os.path.join(args.out, "robustness.md"), "w", encoding="utf-8") as handle:
-        handle.write(f"# Robustness matrix ({args.duration:g} s per case)\n\n{table}\n")
-    write_json(os.path.join(args.out, "robustness.json"),
-               {case.name: summary for case, summary in results})
+        handle.write(f"# Robustness matrix ({title})\n\n{table}\n")
     print(table)
-    failed = [c.name for c, s in results
-              if s["diverged"] or s["final_rms_true_error_px"] > c.rms_bound_px]
+    failed = outside_bounds(rows)
     if failed:
         print(f"outside their bounds: {failed}", file=sys.stderr)
     return 1 if failed else 0
@@ -131,9 +124,15 @@ def build_parser():
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on a terminal)")
     run.set_defaults(func=cmd_run)
-    rob = sub.add_parser("robustness", help="run the robustness matrix and write its table")
-    rob.add_argument("--out", required=True, help="output folder (created)")
-    rob.add_argument("--duration", type=float, default=10.0, help="simulated seconds per case")
+    rob = sub.add_parser("robustness", help="run the robustness matrix (a campaign) and write "
+                         "its table")
+    rob.add_argument("--out", required=True, help="output folder (created; rerun to resume)")
+    rob.add_argument("--duration", type=float,
+                     help="simulated seconds per case (default: the spec's, 10 s)")
+    rob.add_argument("--workers", type=int, help="worker processes (default: every core)")
+    rob.add_argument("--ray", metavar="auto|ADDRESS", help="run on Ray (pip install '.[ray]')")
+    rob.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                     help="progress bar (default: on a terminal)")
     rob.set_defaults(func=cmd_robustness)
     add_compare_parser(sub)
     add_teach_parser(sub, _floats)

@@ -12,15 +12,18 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""``vas compare``: the paper's controller against its baselines, scenario by scenario.
+"""``vas compare``: the paper's controller against its baselines, condition by condition.
 
-For each base configuration (by default config/paper_3dof.yaml and the
-noise-robust preset config/paper_3dof_noisy.yaml) and each :data:`SCENARIOS`
-entry, the closed loop of :func:`~.runner.run_scenario` is run with each of
-:data:`CONTROLLERS`:
+The comparison is a campaign (:mod:`.campaign`): ``config/campaigns/compare.yaml``
+names the conditions (cases: noise, camera delay, wrong estimates, slow and late
+cameras) and crosses them with the base configurations (config/paper_3dof.yaml and
+the noise-robust preset) and :data:`CONTROLLER_NAMES`:
 
 ``observer``
-    the paper's controller (H. Wang 2015): image-space observer, no image velocity;
+    the paper's controller (H. Wang 2015): image-space observer, no image velocity,
+    late frames applied at their capture time and predicted to now;
+``observer-uncompensated``
+    the same controller taking each frame as current when it arrives;
 ``velocity-diff``
     :class:`~.baselines.VelocityAdaptiveTracker` on the raw backward difference
     of the pixels (prediction-error gain 1e-3);
@@ -30,8 +33,8 @@ entry, the closed loop of :func:`~.runner.run_scenario` is run with each of
     :class:`~.baselines.CalibratedIBVS`, true camera and arm: the upper reference.
 
 The adaptive controllers all use the base configuration's gains, initial
-estimates, bounds and torque limit.  Figures of one run, over the window after
-the transient (t >= ``transient``, 5 s by default):
+estimates, bounds and torque limit; every controller gets the same camera frames.
+Figures of one run, over the window after the transient (t >= 5 s):
 
 * RMS and max of the true image error, max_i |x_true,i - x_d,i| [px], from the
   noiseless pixels: the tracking itself, not the measurement noise;
@@ -41,74 +44,49 @@ the transient (t >= ``transient``, 5 s by default):
   non-finite or runaway joint state) and when.
 
 Outputs in the output folder: compare.md (tables), compare.json (every figure),
-compare_error.png, compare_chatter.png, compare_timeseries.png, and runs/ with
-each run's timeseries.csv and summary.json.
+compare_error.png, compare_chatter.png, compare_timeseries.png, campaign/ (the
+campaign's runs.csv and summary) and runs/<id>/ with each run's timeseries.csv and
+summary.json.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import functools
 import math
 import os
-import sys
-from dataclasses import dataclass
 
 import numpy as np
 
 PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # the names of controllers(), known without importing the controllers (vas start-up)
-CONTROLLER_NAMES = ("observer", "velocity-diff", "velocity-lp", "ibvs-calibrated")
-DEFAULT_CONFIGS = ("paper_3dof.yaml", "paper_3dof_noisy.yaml")
+CONTROLLER_NAMES = ("observer", "observer-uncompensated", "velocity-diff", "velocity-lp",
+                    "ibvs-calibrated")
+SPEC = os.path.join(PACKAGE_ROOT, "config", "campaigns", "compare.yaml")
 TRANSIENT_S = 5.0
+LABELS = {"clean": "clean", "noise_0.25": "pixel noise 0.25 px", "noise_0.5": "pixel noise 0.5 px",
+          "noise_1": "pixel noise 1 px", "delay_1": "camera 5 ms late (1 frame)",
+          "delay_2": "camera 10 ms late (2 frames)",
+          "estimates_x0.5": "kinematic estimates x0.5", "estimates_x2": "kinematic estimates x2",
+          "camera_30hz_0ms": "camera 30 Hz, 1 kHz joints",
+          "camera_30hz_33ms": "camera 30 Hz, 33 ms late, 1 kHz joints",
+          "camera_30hz_66ms": "camera 30 Hz, 66 ms late, 1 kHz joints",
+          "camera_60hz_20ms": "camera 60 Hz, 20 ms late, 1 kHz joints"}
 LOW_PASS_S = 0.1
 PREDICTION_GAIN = 1e-3
 
 
-@dataclass(frozen=True)
-class Scenario:
-    """One condition: parameter overrides on top of a base configuration."""
-
-    name: str
-    label: str
-    overrides: tuple
-
-
-def scenarios(model):
-    """The compared conditions; wrong estimates are relative to the model's true values."""
-    clean = ("sim_node.pixel_noise_std=0.0", "sim_node.camera_latency=0.0")
-
-    def estimates(factor):
-        a_perp = [float(v) * factor for v in model.a_z_perp]
-        a_z = [float(v) * factor for v in model.a_z]
-        return clean + (f"controller_node.a_z_perp_init={a_perp}",
-                        f"controller_node.a_z_init={a_z}")
-
-    return (
-        Scenario("clean", "clean", clean),
-        Scenario("noise_0.25", "pixel noise 0.25 px", ("sim_node.pixel_noise_std=0.25",
-                                                       "sim_node.camera_latency=0.0")),
-        Scenario("noise_0.5", "pixel noise 0.5 px", ("sim_node.pixel_noise_std=0.5",
-                                                     "sim_node.camera_latency=0.0")),
-        Scenario("noise_1", "pixel noise 1 px", ("sim_node.pixel_noise_std=1.0",
-                                                 "sim_node.camera_latency=0.0")),
-        Scenario("delay_1", "camera delay 1 frame", ("sim_node.pixel_noise_std=0.0",
-                                                     "sim_node.camera_latency=0.005")),
-        Scenario("delay_2", "camera delay 2 frames", ("sim_node.pixel_noise_std=0.0",
-                                                      "sim_node.camera_latency=0.01")),
-        Scenario("estimates_x0.5", "kinematic estimates x0.5", estimates(0.5)),
-        Scenario("estimates_x2", "kinematic estimates x2", estimates(2.0)),
-    )
-
-
 def controllers():
     """(name, description, factory) of every compared controller."""
-    from .baselines import CalibratedIBVS, VelocityAdaptiveTracker
+    from .baselines import CalibratedIBVS, FrameHoldingTracker, VelocityAdaptiveTracker
     from .controller import AdaptiveVisualTracker
 
     return (
         ("observer", "Wang 2015: observer, no image velocity (this package)",
          AdaptiveVisualTracker),
+        ("observer-uncompensated", "the same, each camera frame taken as current when it "
+         "arrives (no latency compensation)", FrameHoldingTracker),
         ("velocity-diff", "velocity-based adaptive, backward-difference image velocity",
          functools.partial(VelocityAdaptiveTracker, prediction_gain=PREDICTION_GAIN)),
         ("velocity-lp", f"velocity-based adaptive, backward difference + {LOW_PASS_S:g} s "
@@ -167,58 +145,45 @@ def run_figures(t, x_true, x_d, tau, period, transient=TRANSIENT_S):
     return figures
 
 
-def run_compare(out_dir, configs=None, duration=30.0, transient=TRANSIENT_S, seed=None,
-                progress=sys.stderr):
-    """Run every (configuration, scenario, controller); return the list of result dicts."""
-    from .config import ConfigError, load_scenario
-    from .runner import run_scenario
+def run_compare(out_dir, spec=SPEC, workers=None, ray=None, duration=None, seed=None,
+                progress=None):
+    """Run the comparison campaign in ``out_dir``; return the list of result dicts.
 
-    configs = list(configs) if configs else default_configs()
-    ctls = controllers()
+    ``duration`` and ``seed`` (the pixel-noise seed) override the spec's; the runs go
+    to the campaign engine (``workers`` processes, or Ray), resumable like any campaign.
+    """
+    from .campaign import CSV_NAME, read_rows, run_campaign
+    from .campaign_engine import execute_run
+    from .campaign_spec import derived_spec, load_spec
+
+    os.makedirs(out_dir, exist_ok=True)
+    if duration is not None or seed is not None:
+        spec = derived_spec(spec, os.path.join(out_dir, "compare_spec.yaml"), duration,
+                            None if seed is None else {"seed": int(seed)})
+    keep = os.path.join(out_dir, "runs")
+    run_campaign(spec, os.path.join(out_dir, "campaign"), workers, ray,
+                 run_fn=functools.partial(execute_run, keep_dir=keep), progress=progress)
+    loaded = load_spec(spec)
+    rows = read_rows(os.path.join(out_dir, "campaign", CSV_NAME), loaded)
+    base = os.path.splitext(os.path.basename(loaded.base))[0]
     results = []
-    for config in configs:
-        base = os.path.splitext(os.path.basename(config))[0]
-        model = load_scenario(config).controller.model
-        for scen in scenarios(model):
-            overrides = scen.overrides + ((f"sim_node.seed={seed}",) if seed is not None else ())
-            try:
-                scenario = load_scenario(config, overrides)
-            except ConfigError as exc:
-                results += [_refused(base, scen, name, str(exc)) for name, _, _ in ctls]
-                continue
-            period = scenario.sim.control_period
-            for name, _, factory in ctls:
-                run_dir = os.path.join(out_dir, "runs", base, scen.name, name)
-                if progress is not None:
-                    print(f"{base} / {scen.name} / {name}", file=progress, flush=True)
-                summary = run_scenario(scenario, run_dir, duration=duration, progress=False,
-                                       record=False, plots=False, controller_factory=factory)
-                figures = run_figures(*read_timeseries(os.path.join(run_dir, "timeseries.csv")),
-                                      period, transient)
-                results.append({
-                    "config": base, "scenario": scen.name, "scenario_label": scen.label,
-                    "controller": name, **figures,
-                    "diverged": bool(summary["diverged"]),
-                    "divergence_reason": summary["divergence_reason"],
-                    "diverged_at_s": (summary["sim_time_s"] if summary["diverged"] else None),
-                    "peak_abs_torque": summary["max_abs_torque"],
-                    "saturated_samples": summary["saturated"],
-                    "error": summary.get("error"),
-                })
+    for row in sorted(rows, key=lambda r: r["id"]):
+        f = row["factors"]
+        config = os.path.splitext(f.get("base") or base)[0]
+        failed = row["status"] != "finished"
+        results.append({
+            "id": row["id"], "config": config, "scenario": f["case"],
+            "scenario_label": LABELS.get(f["case"], f["case"]), "controller": f["controller"],
+            "rms_error_px": row["transient_rms_true_error_px"],
+            "max_error_px": row["transient_max_true_error_px"],
+            "torque_rms": row["torque_rms"], "torque_rate_rms": row["torque_rate_rms"],
+            "diverged": row["diverged"] and not failed,
+            "diverged_at_s": row["sim_time_s"] if row["diverged"] else None,
+            "peak_abs_torque": row["max_abs_torque"],
+            "error": row["reason"] if failed else None,
+            "timeseries": os.path.join(keep, f"{row['id']:05d}", "timeseries.csv"),
+            "command": row["command"]})
     return results
-
-
-def default_configs():
-    paths = [os.path.join(PACKAGE_ROOT, "config", name) for name in DEFAULT_CONFIGS]
-    return [p for p in paths if os.path.exists(p)]
-
-
-def _refused(base, scen, name, reason):
-    return {"config": base, "scenario": scen.name, "scenario_label": scen.label,
-            "controller": name, "rms_error_px": math.nan, "max_error_px": math.nan,
-            "torque_rms": math.nan, "torque_rate_rms": math.nan, "window_s": 0.0,
-            "diverged": False, "divergence_reason": "", "diverged_at_s": None,
-            "peak_abs_torque": math.nan, "saturated_samples": 0, "error": reason}
 
 
 def _cell(r, key, fmt):
@@ -230,7 +195,7 @@ def _cell(r, key, fmt):
     return "-" if not math.isfinite(value) else format(value, fmt)
 
 
-def markdown(results, duration, transient):
+def markdown(results, duration, transient=TRANSIENT_S):
     """compare.md: a headline table per base configuration, then every figure."""
     names = [name for name, _, _ in controllers()]
     lines = [f"# Observer-based adaptive tracking vs baselines ({duration:g} s per run, "
@@ -255,8 +220,7 @@ def markdown(results, duration, transient):
                   "|---|---|---:|---:|---:|---:|---:|---|"]
         for r in rows:
             result = ("error: " + r["error"] if r["error"] else
-                      f"diverged at {r['diverged_at_s']:.2f} s: {r['divergence_reason']}"
-                      if r["diverged"] else "ok")
+                      f"diverged at {r['diverged_at_s']:.2f} s" if r["diverged"] else "ok")
             lines.append(
                 f"| {r['scenario_label']} | `{r['controller']}` | "
                 f"{_fmt(r['rms_error_px'], '.4f')} | {_fmt(r['max_error_px'], '.3f')} | "
@@ -326,14 +290,15 @@ def plot_compare(results, out_dir, transient=TRANSIENT_S):
 def _plot_timeseries(results, out_dir, configs, names, plt):
     from .runner import point_error
 
-    shown = ("clean", "noise_0.5", "delay_2")
+    shown = ("clean", "noise_0.5", "camera_30hz_33ms")
     fig, axes = plt.subplots(len(configs), len(shown), figsize=(12, 3.2 * len(configs)),
                              squeeze=False, sharex=True)
     for row, config in enumerate(configs):
         for col, scen in enumerate(shown):
             ax = axes[row, col]
             for name in names:
-                path = os.path.join(out_dir, "runs", config, scen, name, "timeseries.csv")
+                path = next((r["timeseries"] for r in results if r["config"] == config
+                             and r["scenario"] == scen and r["controller"] == name), "")
                 if not os.path.exists(path):
                     continue
                 t, x_true, x_d, _ = read_timeseries(path)
@@ -356,35 +321,44 @@ def _plot_timeseries(results, out_dir, configs, names, plt):
 
 
 def cmd_compare(args):
-    """``vas compare``: run everything, write compare.md/.json and the plots."""
+    """``vas compare``: run the comparison campaign, write compare.md/.json and the plots."""
     from .recording import write_json
 
-    os.makedirs(args.out, exist_ok=True)
-    results = run_compare(args.out, args.config, args.duration, args.transient, args.seed)
-    text = markdown(results, args.duration, args.transient)
+    results = run_compare(args.out, args.spec, args.workers, args.ray, args.duration, args.seed,
+                          args.progress)
+    duration = args.duration or _spec_duration(args.spec)
+    text = markdown(results, duration)
     with open(os.path.join(args.out, "compare.md"), "w", encoding="utf-8") as handle:
         handle.write(text + "\n")
     write_json(os.path.join(args.out, "compare.json"),
-               {"duration_s": args.duration, "transient_s": args.transient, "runs": results})
-    plots = [] if args.no_plots else plot_compare(results, args.out, args.transient)
+               {"duration_s": duration, "transient_s": TRANSIENT_S, "runs": results})
+    plots = [] if args.no_plots else plot_compare(results, args.out)
     print(text)
     print(f"outputs in {args.out}: compare.md, compare.json"
-          + "".join(f", {os.path.basename(p)}" for p in plots) + ", runs/")
+          + "".join(f", {os.path.basename(p)}" for p in plots) + ", campaign/, runs/")
     return 1 if any(r["error"] for r in results) else 0
+
+
+def _spec_duration(spec):
+    from .campaign_spec import load_spec
+
+    return load_spec(spec).duration
 
 
 def add_parser(subparsers):
     """Register ``vas compare`` (called by :func:`~.cli.build_parser`)."""
     cmp = subparsers.add_parser("compare", help="the paper's controller against baselines "
-                                "(velocity-based adaptive, calibrated IBVS)")
-    cmp.add_argument("--out", required=True, help="output folder (created)")
-    cmp.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run")
-    cmp.add_argument("--config", action="append", metavar="FILE",
-                     help="base configuration (repeatable; default: config/paper_3dof.yaml "
-                     "and config/paper_3dof_noisy.yaml)")
-    cmp.add_argument("--transient", type=float, default=TRANSIENT_S,
-                     help="figures are taken over t >= this [s]")
+                                "(velocity-based adaptive, calibrated IBVS), as a campaign")
+    cmp.add_argument("--out", required=True, help="output folder (created; rerun to resume)")
+    cmp.add_argument("--spec", default=SPEC, help="the comparison campaign (default: "
+                     "config/campaigns/compare.yaml)")
+    cmp.add_argument("--duration", type=float, help="simulated seconds per run (default: "
+                     "the spec's, 30 s)")
     cmp.add_argument("--seed", type=int, help="pixel-noise seed (default: the configuration's)")
+    cmp.add_argument("--workers", type=int, help="worker processes (default: every core)")
+    cmp.add_argument("--ray", metavar="auto|ADDRESS", help="run on Ray (pip install '.[ray]')")
+    cmp.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                     help="progress bar (default: on a terminal)")
     cmp.add_argument("--no-plots", action="store_true", help="tables only")
     cmp.set_defaults(func=cmd_compare)
     return cmp

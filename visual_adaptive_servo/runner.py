@@ -145,7 +145,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             counters["damped"] += res.damped
             x = meas.pixels if meas.pixels is not None else np.nan
             series.add(t=meas.t, x=x, x_true=truth.true_pixels, x_d=res.x_d, x_obs=res.x_obs,
-                       z=truth.true_depth, z_hat=res.z_hat, q=truth.q, qd=truth.qd, tau=res.tau,
+                       z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q, qd=truth.qd,
+                       tau=res.tau,
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
             series.status.append(res.status)
             if recorder is not None:
@@ -155,7 +156,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             # divergence is judged on the plant itself, not on injected measurement faults;
             # checked on Python floats (np.all/np.max cost microseconds on 3 elements)
             qd_list = truth.qd.tolist()
-            if not all(map(math.isfinite, truth.q.tolist() + qd_list)):
+            if not all(map(math.isfinite, truth.true_q.tolist() + qd_list)):
                 diverged, reason = True, f"joint state not finite at t={meas.t:.3f}"
             elif max(map(abs, unsat.tolist())) > limit:
                 diverged, reason = True, (f"|tau| = {np.max(np.abs(unsat)):.3g} N m > "
@@ -186,7 +187,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     data = series.view()
     counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
     counters.update(detections.figures())
-    summary = summarize(data, series.status, wall, diverged, reason, counters)
+    summary = summarize(data, series.status, wall, diverged, reason, counters, period)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
                    outputs=["summary.json", "timeseries.csv"])
@@ -250,13 +251,23 @@ def camera_figures(frames, feature_camera):
     return figures
 
 
-def summarize(data, status, wall, diverged, reason, counters):
+def summarize(data, status, wall, diverged, reason, counters, period):
+    """summary.json's figures of a run's samples ``data``.
+
+    The transient_* and torque ones are over t >= 5 s (:func:`.compare.run_figures`).
+    """
+    from .compare import run_figures    # numpy only; compare's figures of the same run
+
     t = data["t"]
+    late = run_figures(t, data["x_true"], data["x_d"], data["tau"], period)
+    transient = {"transient_rms_true_error_px": late["rms_error_px"],
+                 "transient_max_true_error_px": late["max_error_px"],
+                 "torque_rms": late["torque_rms"], "torque_rate_rms": late["torque_rate_rms"]}
     if len(t) == 0:
         return {"diverged": diverged, "divergence_reason": reason, "final_rms_error_px": math.nan,
                 "max_error_px": math.nan, "max_abs_torque": math.nan,
                 "final_depth_error": math.nan, "sim_time_s": 0.0, "wall_time_s": wall,
-                "realtime_factor": 0.0, **counters}
+                "realtime_factor": 0.0, **transient, **counters}
     window = t >= t[-1] - RMS_WINDOW_S + 1e-9
     sim_time = float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0))
     rms, peak = error_figures(data["x"], data["x_d"], window)
@@ -275,6 +286,7 @@ def summarize(data, status, wall, diverged, reason, counters):
         "sim_time_s": sim_time,
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else math.inf,
+        **transient,
         **counters,
     }
 
