@@ -38,7 +38,11 @@ out: ``/camera/features`` (geometry_msgs/PolygonStamped, one Point32 (u, v, 0) p
 QoS: ``timing_mode: lockstep`` makes the image subscription and the features
 (and overlay) publishers reliable (depth 10), ``realtime`` makes them sensor
 data (best effort, depth 5), as for the other nodes' measurements; the
-controller and the camera driver must use the same.
+controller and the camera driver must use the same.  In lockstep the node
+also waits (at most ``DELIVERY_TIMEOUT``) until every subscriber has
+acknowledged the features before it takes the next image: the simulator
+publishes the joint state when it has the features, and the controller should
+have them by then.
 
 Runtime parameters: ``markers.colors`` (the number of markers cannot change),
 ``markers.tolerance`` and ``blob_area`` can be set while running, for tuning
@@ -51,9 +55,8 @@ from __future__ import annotations
 import sys
 import time
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -61,10 +64,12 @@ from . import messages as m
 from .config import DETECTOR_PARAMS, DETECTOR_SECTION, ConfigError
 from .detection import DetectorConfig, detect, image_points
 from .overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
+from .ros_main import run_node
 from .ros_params import declare_schema, from_ros
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of wall time between two /diagnostics when the level stays
+DELIVERY_TIMEOUT = Duration(seconds=1.0)   # lockstep: wait for the features' acknowledgement
 
 
 class FeatureDetectorNode(Node):
@@ -77,7 +82,8 @@ class FeatureDetectorNode(Node):
         self.config = DetectorConfig.from_params(self.params)
         self.msgs = msgs = m.rclpy_messages()
 
-        qos = RELIABLE if self.params["timing_mode"] == "lockstep" else qos_profile_sensor_data
+        self.lockstep = self.params["timing_mode"] == "lockstep"
+        qos = RELIABLE if self.lockstep else qos_profile_sensor_data
         self.features_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features", qos)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
@@ -92,7 +98,7 @@ class FeatureDetectorNode(Node):
         self.create_subscription(msgs.Image, "/camera/image_raw", self._on_image, qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.counters = {"frames": 0, "frames_without_features": 0}
+        self.counters = {"frames": 0, "frames_without_features": 0, "delivery_timeouts": 0}
         self.last_reason = ""
         self.last_level, self.wall_last_diagnostics = None, None
         self.get_logger().info(f"{self.config.m} marker(s), colours "
@@ -113,6 +119,11 @@ class FeatureDetectorNode(Node):
         else:
             self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
                                                            result.pixels))
+            if self.lockstep and not self.features_pub.wait_for_all_acked(DELIVERY_TIMEOUT):
+                self.counters["delivery_timeouts"] += 1
+                self.get_logger().error("features not acknowledged by every subscriber within "
+                                        f"{DELIVERY_TIMEOUT.nanoseconds * 1e-9} s",
+                                        throttle_duration_sec=1.0)
             self._publish_diagnostics(msg, "OK", f"{self.config.m} marker(s) found")
         if self.overlay_pub is not None and self.overlay_pub.get_subscription_count() > 0:
             self._publish_overlay(msg, rgb, result.pixels)
@@ -178,21 +189,7 @@ class FeatureDetectorNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = FeatureDetectorNode()
-    except ConfigError as exc:
-        rclpy.logging.get_logger(DETECTOR_SECTION).fatal(f"invalid configuration: {exc}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(FeatureDetectorNode, DETECTOR_SECTION, args)
 
 
 if __name__ == "__main__":

@@ -61,6 +61,7 @@ TOPICS = {
     f"{CONTROLLER_NS}/tracking_error": "PolygonStamped",
     f"{CONTROLLER_NS}/estimated_depth": "Float64MultiArray",
     f"{CONTROLLER_NS}/parameters": "Float64MultiArray",
+    f"{CONTROLLER_NS}/effort_command": "JointState",
     "/diagnostics": "DiagnosticArray",
 }
 
