@@ -46,24 +46,32 @@ too), with ``start.wait_for_recorder`` also once a recorder subscribes every
 topic of :data:`visual_adaptive_servo.recording.TOPICS` (and /joint_states,
 /clock and /camera/features have two subscribers), then after ``START_SETTLE``
 more, so the other processes have matched each other too: the arm does not
-fall meanwhile and the recording misses no period.
+fall meanwhile and the recording misses no period.  (A recorder with ``--use-sim-time``
+subscribes nothing before /clock has moved, so it cannot be waited for.)
 
 ``lockstep`` (default), one period: measure; publish the camera frame due now
-(if any) and wait until every subscriber has acknowledged it (at most
-``command_timeout``; a timeout is logged as an error and counted); then
-/clock, /joint_states, ~/true_depth; then wait for the stamped command whose
-stamp is this joint state's, hold it for one ``control_period``, and so on.
-A command stamped otherwise is stale (counted, logged, not applied).  The
-controller thus pairs each joint state with the frames sent before it, and the
-run equals ``vas run`` to the bit.  If no command comes within
+(if any) first, then /clock, /joint_states, ~/true_depth; then wait for the
+stamped command whose stamp is this joint state's, hold it for one
+``control_period``, and so on.  A command stamped otherwise is stale (counted,
+logged, not applied).  The controller takes a waiting frame before a waiting
+joint state, so it pairs each joint state with the frames sent before it, as
+long as they arrive before it: on one host they do, both leave this process
+in that order over the same transport (DDS does not order samples of two
+writers in general).  With ``frame_ack`` the simulator also waits until every
+subscriber has acknowledged the frame (``wait_for_all_acked``, at most
+``command_timeout``; a timeout is logged as an error and counted), at the
+price of up to one DDS heartbeat period per frame (about 100 ms with Cyclone
+DDS's defaults, measured: 40 s of wall time for 400 periods instead of 1.5 s).
+The run then equals ``vas run`` to the bit.  If no command comes within
 ``command_timeout`` seconds of wall time, zero torque is applied for that
-period (logged, counted in /diagnostics) and the loop goes on.  Rendered: the
-picture goes to the detector, and the joint state follows when the detector's
-/camera/features with the picture's stamp arrive, or after
-``detector_timeout`` (a frame without features, counted): deterministic up to
-that wait and up to the detector's features reaching the controller before
-the joint state does (the detector waits for their acknowledgement, but the
-simulator cannot see the controller's).
+period (logged, counted in /diagnostics) and the loop goes on.
+
+Rendered: the picture goes to the detector, and the joint state follows when
+the detector's /camera/features with the picture's stamp arrive here, or after
+``detector_timeout`` (a frame without features: counted; the detector
+publishes nothing for a frame in which a marker is missing).  The detector
+sent the features to the controller no later than here, so on one host they
+arrive before the joint state; deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
@@ -359,7 +367,7 @@ class SimNode(Node):
         for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
             pub = self.publishers_by_topic[topic]
             pub.publish(msg)
-            if topic == FEATURES_TOPIC and self.lockstep:
+            if topic == FEATURES_TOPIC and self.lockstep and self.config["frame_ack"]:
                 self._wait_delivered(pub, meas.feature_stamp)
         if meas.problems:
             self.problem = "; ".join(meas.problems)

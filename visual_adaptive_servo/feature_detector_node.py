@@ -38,11 +38,11 @@ out: ``/camera/features`` (geometry_msgs/PolygonStamped, one Point32 (u, v, 0) p
 QoS: ``timing_mode: lockstep`` makes the image subscription and the features
 (and overlay) publishers reliable (depth 10), ``realtime`` makes them sensor
 data (best effort, depth 5), as for the other nodes' measurements; the
-controller and the camera driver must use the same.  In lockstep the node
-also waits (at most ``DELIVERY_TIMEOUT``) until every subscriber has
-acknowledged the features before it takes the next image: the simulator
-publishes the joint state when it has the features, and the controller should
-have them by then.
+controller and the camera driver must use the same.  With ``frame_ack`` in
+lockstep the node also waits (at most ``DELIVERY_TIMEOUT``) until every
+subscriber has acknowledged the features before it takes the next image (the
+simulator publishes the joint state when it has the features; the controller
+should have them by then, which on one host it does without the wait too).
 
 Runtime parameters: ``markers.colors`` (the number of markers cannot change),
 ``markers.tolerance`` and ``blob_area`` can be set while running, for tuning
@@ -119,7 +119,8 @@ class FeatureDetectorNode(Node):
         else:
             self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
                                                            result.pixels))
-            if self.lockstep and not self.features_pub.wait_for_all_acked(DELIVERY_TIMEOUT):
+            if (self.lockstep and self.params["frame_ack"]
+                    and not self.features_pub.wait_for_all_acked(DELIVERY_TIMEOUT)):
                 self.counters["delivery_timeouts"] += 1
                 self.get_logger().error("features not acknowledged by every subscriber within "
                                         f"{DELIVERY_TIMEOUT.nanoseconds * 1e-9} s",
