@@ -36,7 +36,8 @@ in:  lockstep: ``/controller_node/effort_command`` (sensor_msgs/JointState, torq
      ``effort``, stamped with the joint state they answer); realtime:
      ``/effort_controller/commands`` (std_msgs/Float64MultiArray, one torque per joint in
      ``joint_names`` order: the ros2_control JointGroupEffortController convention);
-     rendered lockstep: ``/camera/features`` from the feature detector.
+     rendered lockstep: ``/feature_detector/processed`` (std_msgs/Header: the detector
+     has published the features of the picture with this stamp, if it found any).
 
 Timing (``timing_mode``)
 ------------------------
@@ -67,11 +68,11 @@ The run then equals ``vas run`` to the bit.  If no command comes within
 period (logged, counted in /diagnostics) and the loop goes on.
 
 Rendered: the picture goes to the detector, and the joint state follows when
-the detector's /camera/features with the picture's stamp arrive here, or after
-``detector_timeout`` (a frame without features: counted; the detector
-publishes nothing for a frame in which a marker is missing).  The detector
-sent the features to the controller no later than here, so on one host they
-arrive before the joint state; deterministic up to the detector timeout.
+the detector reports the picture processed (``/feature_detector/processed``
+with its stamp, published after the features, or alone when it found none),
+or after ``detector_timeout`` (counted, logged).  The features thus leave the
+detector before the joint state leaves here, and on one host they reach the
+controller first: deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
@@ -118,6 +119,7 @@ RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_TOPIC = "/effort_controller/commands"
 STAMPED_COMMAND_TOPIC = "/controller_node/effort_command"
 FEATURES_TOPIC = "/camera/features"
+PROCESSED_TOPIC = "/feature_detector/processed"
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
 START_POLL = 0.05          # s of wall time between two checks for the subscribers
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
@@ -154,9 +156,10 @@ class SimNode(Node):
         else:
             self.command_sub = self.create_subscription(
                 msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
+        self.processed_sub = None
         if self.rendered and self.lockstep:
-            self.create_subscription(msgs.PolygonStamped, FEATURES_TOPIC, self._on_detected,
-                                     RELIABLE)
+            self.processed_sub = self.create_subscription(msgs.Header, PROCESSED_TOPIC,
+                                                          self._on_detected, RELIABLE)
         self.render_every = 0
         if config.params["render.enabled"]:
             self.image_pub = self.create_publisher(msgs.Image, "~/image", measurement_qos)
@@ -231,6 +234,8 @@ class SimNode(Node):
             missing.append(f"{command} (no publisher)")
         if self.rendered and self.count_publishers(FEATURES_TOPIC) == 0:
             missing.append(f"{FEATURES_TOPIC} (no publisher: a feature_detector)")
+        if self.processed_sub is not None and self.processed_sub.get_publisher_count() == 0:
+            missing.append(f"{PROCESSED_TOPIC} (no publisher: a feature_detector in lockstep)")
         return missing
 
     def _on_start_poll(self):
@@ -343,8 +348,7 @@ class SimNode(Node):
         self._publish_state(meas)
 
     def _on_detected(self, msg):
-        if (self.awaiting_detection is None
-                or m.stamp_to_ns(msg.header.stamp) != self.awaiting_detection):
+        if self.awaiting_detection is None or m.stamp_to_ns(msg.stamp) != self.awaiting_detection:
             return
         self.detector_timer.cancel()
         self.awaiting_detection = None
@@ -355,8 +359,9 @@ class SimNode(Node):
         if self.awaiting_detection is None or self.finished.done():
             return
         self.counters["detector_timeouts"] += 1
-        self.problem = (f"no features from the detector within {self.config['detector_timeout']}"
-                        f" s for the frame captured at {self.awaiting_detection * 1e-9:.3f} s")
+        self.problem = (f"the detector did not process the frame captured at "
+                        f"{self.awaiting_detection * 1e-9:.3f} s within "
+                        f"{self.config['detector_timeout']} s")
         self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
         self.awaiting_detection = None
         self._publish_state(self.measurement)

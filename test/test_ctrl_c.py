@@ -68,8 +68,8 @@ def _wait_for(path, text, timeout):
 @pytest.mark.parametrize("timing_mode, camera_mode", [
     ("lockstep", "points"), ("realtime", "points"), ("lockstep", "rendered"),
     ("realtime", "rendered")])
-def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(tmp_path, timing_mode,
-                                                                      camera_mode):
+def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
+        tmp_path, timing_mode, camera_mode):
     log = tmp_path / "launch.log"
     env = dict(os.environ, ROS_DOMAIN_ID=str(200 + os.getpid() % 30))
     with open(log, "w", encoding="utf-8") as out:

@@ -192,8 +192,9 @@ SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "
               "a DDS heartbeat period per frame (about 100 ms with Cyclone DDS's defaults); "
               "without it the frame is published first and, on one host, arrives first."),
     ParamSpec("detector_timeout", 0.5, "float",
-              "lockstep, rendered: wall time to wait for the feature detector's /camera/features "
-              "of a picture before the joint state follows without them [s].", 1e-3, 60.0),
+              "lockstep, rendered: wall time to wait for the feature detector to have processed "
+              "a picture (/feature_detector/processed) before the joint state follows [s].",
+              1e-3, 60.0),
     ParamSpec("start.wait_for_recorder", False, "bool",
               "Start only once every recorded topic (visual_adaptive_servo.recording.TOPICS) "
               "has a subscriber and /joint_states, /clock and the features have two (the "
@@ -358,10 +359,6 @@ DETECTOR_PARAMS = (
               "+1 or -1 per axis: u = axes[0] (column - origin[0]), v = axes[1] (row - "
               "origin[1]); [1, 1] for a standard camera, [-1, -1] for the paper's (u to the "
               "left, v up)."),
-    ParamSpec("frame_ack", False, "bool",
-              "lockstep: after publishing features, wait until every subscriber has "
-              "acknowledged them (wait_for_all_acked, at most 1 s) before the next image; up to "
-              "a DDS heartbeat period per frame (about 100 ms with Cyclone DDS's defaults)."),
     ParamSpec("overlay.enabled", True, "bool",
               "Publish ~/overlay: the image with x, x_d and x_o drawn (for image viewers)."),
     ParamSpec("timing_mode", "lockstep", "str",

@@ -33,16 +33,25 @@ out: ``/camera/features`` (geometry_msgs/PolygonStamped, one Point32 (u, v, 0) p
      ``/diagnostics`` (name ``feature_detector``): WARN with the reason when a
      frame gives no features, OK when it does; published when the level changes
      and otherwise at most once a second (wall time), with the counters
-     ``frames``, ``frames_without_features`` and ``last_reason``.
+     ``frames``, ``frames_without_features`` and ``last_reason``;
+     lockstep only: ``~/processed`` (std_msgs/Header, the image's stamp and
+     frame_id) once per image, after the features (see below).
 
 QoS: ``timing_mode: lockstep`` makes the image subscription and the features
 (and overlay) publishers reliable (depth 10), ``realtime`` makes them sensor
 data (best effort, depth 5), as for the other nodes' measurements; the
-controller and the camera driver must use the same.  With ``frame_ack`` in
-lockstep the node also waits (at most ``DELIVERY_TIMEOUT``) until every
-subscriber has acknowledged the features before it takes the next image (the
-simulator publishes the joint state when it has the features; the controller
-should have them by then, which on one host it does without the wait too).
+controller and the camera driver must use the same.
+
+Lockstep (the simulator's rendered mode): after each image, features or not,
+the node publishes ``~/processed`` (std_msgs/Header with the image's stamp),
+after the features.  The simulator waits for it before it publishes the joint
+state, so the features leave this process before the simulator even hears
+that they exist: on one host they reach the controller before the joint
+state does, however the processes are scheduled.  (Waiting for the features
+themselves would not do: one write goes to the simulator and to the controller
+one after the other, and a preemption in between let the joint state overtake
+the controller's copy in 1 of 400 frames here.)  A frame without features
+costs the simulator no wait.
 
 Runtime parameters: ``markers.colors`` (the number of markers cannot change),
 ``markers.tolerance`` and ``blob_area`` can be set while running, for tuning
@@ -56,7 +65,6 @@ import sys
 import time
 
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -69,7 +77,6 @@ from .ros_params import declare_schema, from_ros
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of wall time between two /diagnostics when the level stays
-DELIVERY_TIMEOUT = Duration(seconds=1.0)   # lockstep: wait for the features' acknowledgement
 
 
 class FeatureDetectorNode(Node):
@@ -85,6 +92,8 @@ class FeatureDetectorNode(Node):
         self.lockstep = self.params["timing_mode"] == "lockstep"
         qos = RELIABLE if self.lockstep else qos_profile_sensor_data
         self.features_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features", qos)
+        self.processed_pub = (self.create_publisher(msgs.Header, "~/processed", RELIABLE)
+                              if self.lockstep else None)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         self.overlay_pub = None
@@ -98,7 +107,7 @@ class FeatureDetectorNode(Node):
         self.create_subscription(msgs.Image, "/camera/image_raw", self._on_image, qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.counters = {"frames": 0, "frames_without_features": 0, "delivery_timeouts": 0}
+        self.counters = {"frames": 0, "frames_without_features": 0}
         self.last_reason = ""
         self.last_level, self.wall_last_diagnostics = None, None
         self.get_logger().info(f"{self.config.m} marker(s), colours "
@@ -112,22 +121,18 @@ class FeatureDetectorNode(Node):
             _, rgb = m.image_from_msg(msg)
         except ValueError as exc:
             self._no_features(msg, str(exc))
-            return
-        result = detect(rgb, self.config)
-        if result.pixels is None:
-            self._no_features(msg, result.reason)
         else:
-            self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
-                                                           result.pixels))
-            if (self.lockstep and self.params["frame_ack"]
-                    and not self.features_pub.wait_for_all_acked(DELIVERY_TIMEOUT)):
-                self.counters["delivery_timeouts"] += 1
-                self.get_logger().error("features not acknowledged by every subscriber within "
-                                        f"{DELIVERY_TIMEOUT.nanoseconds * 1e-9} s",
-                                        throttle_duration_sec=1.0)
-            self._publish_diagnostics(msg, "OK", f"{self.config.m} marker(s) found")
-        if self.overlay_pub is not None and self.overlay_pub.get_subscription_count() > 0:
-            self._publish_overlay(msg, rgb, result.pixels)
+            result = detect(rgb, self.config)
+            if result.pixels is None:
+                self._no_features(msg, result.reason)
+            else:
+                self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
+                                                               result.pixels))
+                self._publish_diagnostics(msg, "OK", f"{self.config.m} marker(s) found")
+            if self.overlay_pub is not None and self.overlay_pub.get_subscription_count() > 0:
+                self._publish_overlay(msg, rgb, result.pixels)
+        if self.processed_pub is not None:
+            self.processed_pub.publish(m.copy_header(self.msgs, msg.header))
 
     def _no_features(self, msg, reason):
         self.counters["frames_without_features"] += 1
