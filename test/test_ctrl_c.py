@@ -84,7 +84,7 @@ def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
             r"\[INFO\] \[(\S+)-\d+\]: process started with pid \[(\d+)\]", log.read_text())}
         expected = {"sim_node", "controller_node"} | (
             {"feature_detector"} if camera_mode == "rendered" else set())
-        assert set(nodes.values()) == expected
+        assert set(nodes.values()) == expected, log.read_text()
         sigint = time.monotonic()
         os.killpg(launch.pid, signal.SIGINT)
         stopped = {}
