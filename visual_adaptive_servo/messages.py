@@ -123,6 +123,12 @@ JAZZY_DEFINITIONS = {
                                              "diagnostic_msgs/KeyValue[] values"),
     "diagnostic_msgs/msg/DiagnosticArray": ("std_msgs/Header header\n"
                                             "diagnostic_msgs/DiagnosticStatus[] status"),
+    "sensor_msgs/msg/RegionOfInterest": ("uint32 x_offset\nuint32 y_offset\nuint32 height\n"
+                                         "uint32 width\nbool do_rectify"),
+    "sensor_msgs/msg/CameraInfo": ("std_msgs/Header header\nuint32 height\nuint32 width\n"
+                                   "string distortion_model\nfloat64[] d\nfloat64[9] k\n"
+                                   "float64[9] r\nfloat64[12] p\nuint32 binning_x\n"
+                                   "uint32 binning_y\nsensor_msgs/RegionOfInterest roi"),
 }
 
 
@@ -462,10 +468,10 @@ def sim_output_arrays(meas):
     into that message's bytes.
     """
     t = meas.t
-    has_frame = np.isfinite(meas.pixels).all(axis=1)
-    return [("/clock", None, t, []),
+    has_frame = np.isfinite(meas.feature_stamp)   # a frame's pixels may be NaN (a fault)
+    return [("/camera/features", has_frame, meas.feature_stamp, [_points(meas.pixels)]),
+            ("/clock", None, t, []),
             ("/joint_states", None, t, [meas.q, meas.qd, meas.tau_applied]),
-            ("/camera/features", has_frame, meas.feature_stamp, [_points(meas.pixels)]),
             ("~/true_depth", None, None, [meas.true_depth])]
 
 
@@ -485,7 +491,8 @@ def controller_output_arrays(res):
             ("~/tracking_error", np.isfinite(res.error).all(axis=1), t, [_points(res.error)]),
             ("~/estimated_depth", None, None, [res.z_hat]),
             ("~/parameters", None, None,
-             [np.concatenate([st.a_z_perp, st.a_z, st.a_d], axis=1)])]
+             [np.concatenate([st.a_z_perp, st.a_z, st.a_d], axis=1)]),
+            ("~/effort_command", None, t, [res.tau])]
 
 
 def _points(pixels):

@@ -33,6 +33,7 @@ import numpy as np
 
 from sim_bridge.simulator import Simulator
 
+from . import messages as m
 from .controller import AdaptiveVisualTracker
 from .recording import McapRecorder, write_csv, write_json
 
