@@ -21,37 +21,70 @@ Topics (DESIGN.md section 2)
 ----------------------------
 out: ``/clock`` (rosgraph_msgs/Clock, the simulated time; this node itself runs on
      wall time and must NOT use_sim_time), ``/joint_states`` (q, q_dot, applied torque,
-     stamped with sim time), ``/camera/features`` (PolygonStamped, frame ``camera``,
-     stamp = capture time; nothing is published when no frame is due or the feature is
-     behind the camera), ``~/true_depth`` (Float64MultiArray, ground truth for plots),
-     ``/diagnostics``, and with ``render.enabled`` ``~/image`` (sensor_msgs/Image rgb8:
-     the camera's view with x (red ring), x_d (green cross, from
-     ``/controller_node/desired``) and x_o (blue ring, from ``/controller_node/observed``)).
-in:  ``/effort_controller/commands`` (std_msgs/Float64MultiArray, one torque per joint in
-     ``joint_names`` order: the ros2_control JointGroupEffortController convention).
+     stamped with sim time), ``~/true_depth`` (Float64MultiArray, ground truth for plots),
+     ``/diagnostics``; the camera at ``camera_rate``, each frame when ``camera_latency``
+     has passed, stamped with its capture time:
+     ``camera_mode: points``: ``/camera/features`` (PolygonStamped, frame ``camera``;
+     nothing when the feature is behind the camera);
+     ``camera_mode: rendered``: ``/camera/image_raw`` (sensor_msgs/Image rgb8, the
+     rendered picture) and ``/camera/camera_info`` (sensor_msgs/CameraInfo of the
+     simulated pinhole camera, for viewers), for the ``feature_detector`` node;
+     with ``render.enabled`` ``~/image`` (sensor_msgs/Image rgb8: the camera's view with x
+     (red ring), x_d (green cross, from ``/controller_node/desired``) and x_o (blue ring,
+     from ``/controller_node/observed``), for humans).
+in:  lockstep: ``/controller_node/effort_command`` (sensor_msgs/JointState, torques in
+     ``effort``, stamped with the joint state they answer); realtime:
+     ``/effort_controller/commands`` (std_msgs/Float64MultiArray, one torque per joint in
+     ``joint_names`` order: the ros2_control JointGroupEffortController convention);
+     rendered lockstep: ``/feature_detector/processed`` (std_msgs/Header: the detector
+     has published the features of the picture with this stamp, if it found any).
 
 Timing (``timing_mode``)
 ------------------------
-Both modes start once a controller is connected (a publisher on the command
-topic and a subscriber on /joint_states), so the arm does not fall meanwhile.
+The simulation starts once a controller is connected (it publishes the command
+and subscribes /joint_states and the frame topic; in rendered mode a detector
+too), with ``start.wait_for_recorder`` also once a recorder subscribes every
+topic of :data:`visual_adaptive_servo.recording.TOPICS` (and /joint_states,
+/clock and /camera/features have two subscribers), then after ``START_SETTLE``
+more, so the other processes have matched each other too: the arm does not
+fall meanwhile and the recording misses no period.  (A recorder with ``--use-sim-time``
+subscribes nothing before /clock has moved, so it cannot be waited for.)
 
-``lockstep`` (default): publish the state at t_k, wait for the next command,
-hold it for one ``control_period``, publish the state at t_k+1, ...  The
-simulation runs as fast as the controller answers, deterministically.  If no
-command comes within ``command_timeout`` seconds of wall time, zero torque is
-applied for that period (logged, counted in /diagnostics) and the loop goes on.
-The command has no stamp, so a late command is applied to the next period.
+``lockstep`` (default), one period: measure; publish the camera frame due now
+(if any) first, then /clock, /joint_states, ~/true_depth; then wait for the
+stamped command whose stamp is this joint state's, hold it for one
+``control_period``, and so on.  A command stamped otherwise is stale (counted,
+logged, not applied).  The controller takes a waiting frame before a waiting
+joint state, so it pairs each joint state with the frames sent before it, as
+long as they arrive before it: on one host they do, both leave this process
+in that order over the same transport (DDS does not order samples of two
+writers in general).  With ``frame_ack`` the simulator also waits until every
+subscriber has acknowledged the frame (``wait_for_all_acked``, at most
+``command_timeout``; a timeout is logged as an error and counted), at the
+price of up to one DDS heartbeat period per frame (about 100 ms with Cyclone
+DDS's defaults, measured: 40 s of wall time for 400 periods instead of 1.5 s).
+The run then equals ``vas run`` to the bit.  If no command comes within
+``command_timeout`` seconds of wall time, zero torque is applied for that
+period (logged, counted in /diagnostics) and the loop goes on.
+
+Rendered: the picture goes to the detector, and the joint state follows when
+the detector reports the picture processed (``/feature_detector/processed``
+with its stamp, published after the features, or alone when it found none),
+or after ``detector_timeout`` (counted, logged).  The features thus leave the
+detector before the joint state leaves here, and on one host they reach the
+controller first: deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
-command (zero torque once it is older than ``command_timeout``).
+/effort_controller/commands (zero torque once it is older than
+``command_timeout``).
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
-is reliable (depth 10); in realtime the measurements (/joint_states,
-/camera/features, ~/image) are sensor data (best effort, depth 5) and the
-rest is reliable.
+is reliable (depth 10); in realtime the measurements (/joint_states, the
+camera topics, ~/image) are sensor data (best effort, depth 5) and the rest is
+reliable.
 
 ``duration`` > 0: after that much simulated time the node stops stepping and
-exits with status 0.
+exits with status 0.  SIGINT/SIGTERM stop it cleanly (:mod:`.ros_main`).
 """
 
 from __future__ import annotations
@@ -60,9 +93,8 @@ import sys
 import time
 
 import numpy as np
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
@@ -76,6 +108,8 @@ from visual_adaptive_servo.config import (
     build_sim_arm,
 )
 from visual_adaptive_servo.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
+from visual_adaptive_servo.recording import TOPICS
+from visual_adaptive_servo.ros_main import run_node
 from visual_adaptive_servo.ros_params import declare_schema
 
 from . import render
@@ -83,8 +117,13 @@ from .simulator import Simulator
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_TOPIC = "/effort_controller/commands"
+STAMPED_COMMAND_TOPIC = "/controller_node/effort_command"
+FEATURES_TOPIC = "/camera/features"
+PROCESSED_TOPIC = "/feature_detector/processed"
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
-START_POLL = 0.05          # s of wall time between two checks for a connected controller
+START_POLL = 0.05          # s of wall time between two checks for the subscribers
+START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
+WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
 
 
 class SimNode(Node):
@@ -97,18 +136,30 @@ class SimNode(Node):
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
         self.lockstep = config.timing_mode == "lockstep"
+        self.rendered = config.camera_mode == "rendered"
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
 
+        camera_topics = ((("/camera/image_raw", "Image"), ("/camera/camera_info", "CameraInfo"))
+                         if self.rendered else ((FEATURES_TOPIC, "PolygonStamped"),))
         self.publishers_by_topic = {
             topic: self.create_publisher(getattr(msgs, kind), topic, qos)
-            for topic, kind, qos in (("/clock", "Clock", RELIABLE),
-                                     ("/joint_states", "JointState", measurement_qos),
-                                     ("/camera/features", "PolygonStamped", measurement_qos),
-                                     ("~/true_depth", "Float64MultiArray", RELIABLE))}
+            for topic, kind, qos in (
+                *((topic, kind, measurement_qos) for topic, kind in camera_topics),
+                ("/clock", "Clock", RELIABLE),
+                ("/joint_states", "JointState", measurement_qos),
+                ("~/true_depth", "Float64MultiArray", RELIABLE))}
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
-        self.create_subscription(msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command,
-                                 RELIABLE)
+        if self.lockstep:
+            self.command_sub = self.create_subscription(
+                msgs.JointState, STAMPED_COMMAND_TOPIC, self._on_stamped_command, RELIABLE)
+        else:
+            self.command_sub = self.create_subscription(
+                msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
+        self.processed_sub = None
+        if self.rendered and self.lockstep:
+            self.processed_sub = self.create_subscription(msgs.Header, PROCESSED_TOPIC,
+                                                          self._on_detected, RELIABLE)
         self.render_every = 0
         if config.params["render.enabled"]:
             self.image_pub = self.create_publisher(msgs.Image, "~/image", measurement_qos)
@@ -126,25 +177,79 @@ class SimNode(Node):
         if self.lockstep:
             self.step_timer = self.create_timer(config.command_timeout, self._on_command_timeout,
                                                 clock=steady, autostart=False)
+            self.detector_timer = self.create_timer(config["detector_timeout"],
+                                                    self._on_detector_timeout, clock=steady,
+                                                    autostart=False)
         else:
             self.step_timer = self.create_timer(config.control_period, self._on_tick,
                                                 clock=steady, autostart=False)
+        self.ack_timeout = Duration(seconds=config.command_timeout)
 
         self.finished = Future()
         self.started = False
         self.measurement = None
+        self.step_ns = None             # stamp of the joint state waiting for its command
+        self.awaiting_detection = None  # stamp of the picture waiting for its features
         self.command, self.command_wall = None, None
-        self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0}
+        self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
+                         "stale_commands": 0, "frame_delivery_timeouts": 0,
+                         "detector_timeouts": 0}
         self.problem = ""
         self.last_level, self.t_last_diagnostics = None, None
         self.wall_start = None
-        self.get_logger().info(f"{config.timing_mode}: waiting for a controller on "
-                               f"{COMMAND_TOPIC}")
+        self.ready_since, self.wall_last_waiting = None, time.monotonic()
+        self.get_logger().info(
+            f"{config.timing_mode}, camera {config.camera_mode}: waiting for a controller"
+            + (" and a recorder" if config["start.wait_for_recorder"] else ""))
 
     # -- start -------------------------------------------------------------------
+    def _subscribers(self, topic):
+        """Subscriptions to ``topic`` in the ROS graph, this node's own left out."""
+        return sum(1 for info in self.get_subscriptions_info_by_topic(topic)
+                   if (info.node_name, info.node_namespace) != (self.get_name(),
+                                                                self.get_namespace()))
+
+    def _missing(self):
+        """What the start still waits for (empty when everything is connected).
+
+        Subscribers of this node's own publishers are counted as matched
+        (``get_subscription_count``), the others from the graph.
+        """
+        pubs = self.publishers_by_topic
+        matched = {topic: pub.get_subscription_count() for topic, pub in pubs.items()}
+        matched[pubs["~/true_depth"].topic_name] = matched.pop("~/true_depth")
+        matched["/diagnostics"] = self.diagnostics_pub.get_subscription_count()
+        need = {"/joint_states": 1, "/camera/features": 1}
+        if self.config["start.wait_for_recorder"]:
+            need = dict.fromkeys(TOPICS, 1)
+            need.update({"/joint_states": 2, "/clock": 2, "/camera/features": 2})
+        if self.rendered:
+            need["/camera/image_raw"] = 1
+        missing = [f"{topic} ({count} of {need[topic]} subscribers)"
+                   for topic in sorted(need)
+                   for count in [matched[topic] if topic in matched else self._subscribers(topic)]
+                   if count < need[topic]]
+        command = STAMPED_COMMAND_TOPIC if self.lockstep else COMMAND_TOPIC
+        if self.command_sub.get_publisher_count() == 0:
+            missing.append(f"{command} (no publisher)")
+        if self.rendered and self.count_publishers(FEATURES_TOPIC) == 0:
+            missing.append(f"{FEATURES_TOPIC} (no publisher: a feature_detector)")
+        if self.processed_sub is not None and self.processed_sub.get_publisher_count() == 0:
+            missing.append(f"{PROCESSED_TOPIC} (no publisher: a feature_detector in lockstep)")
+        return missing
+
     def _on_start_poll(self):
-        if (self.count_publishers(COMMAND_TOPIC) == 0
-                or self.publishers_by_topic["/joint_states"].get_subscription_count() == 0):
+        missing = self._missing()
+        now = time.monotonic()
+        if missing:
+            self.ready_since = None
+            if now - self.wall_last_waiting >= WAITING_LOG_PERIOD:
+                self.get_logger().info("waiting for: " + ", ".join(missing))
+                self.wall_last_waiting = now
+            return
+        if self.ready_since is None:
+            self.ready_since = now
+        if now - self.ready_since < START_SETTLE:
             return
         self.start_timer.cancel()
         self.started = True
@@ -155,16 +260,27 @@ class SimNode(Node):
             self.step_timer.reset()
 
     # -- commands and stepping ---------------------------------------------------
+    def _on_stamped_command(self, msg):
+        if not self.started or self.finished.done():
+            return
+        refused = None
+        try:
+            stamp_ns, tau = m.effort_command_from_msg(msg, self.config.joint_names)
+        except ValueError as exc:
+            stamp_ns, tau, refused = m.stamp_to_ns(msg.header.stamp), None, str(exc)
+        if stamp_ns != self.step_ns:
+            self.counters["stale_commands"] += 1
+            self.problem = (f"stale command stamped {stamp_ns * 1e-9:.3f} s at "
+                            f"t={self.sim.t:.3f}: not applied")
+            self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+            return
+        self._advance(tau, refused)
+
     def _on_command(self, msg):
-        tau = m.float_array_from_msg(msg)[0]
-        if self.lockstep:
-            if self.started and not self.finished.done():
-                self._advance(tau)
-        else:
-            self.command, self.command_wall = tau, time.monotonic()
+        self.command, self.command_wall = m.float_array_from_msg(msg)[0], time.monotonic()
 
     def _on_command_timeout(self):
-        if not self.started or self.finished.done():
+        if self.step_ns is None or self.finished.done():
             return
         self.counters["command_timeouts"] += 1
         self.problem = (f"no command within {self.config.command_timeout} s at "
@@ -184,8 +300,15 @@ class SimNode(Node):
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
         self._advance(self.command if fresh else np.zeros(self.sim.n))
 
-    def _advance(self, tau):
-        refused = self.sim.apply(tau)
+    def _advance(self, tau, refused=None):
+        """Hold ``tau`` for one period (zero torque if it is ``refused``: why), then measure."""
+        if self.lockstep:
+            self.step_timer.cancel()
+            self.step_ns = None
+        if refused is None:
+            refused = self.sim.apply(tau)
+        else:
+            self.sim.apply(np.zeros(self.sim.n))
         self.counters["steps"] += 1
         if refused is not None:
             self.counters["refused_commands"] += 1
@@ -196,29 +319,77 @@ class SimNode(Node):
             self._finish()
             return
         self._publish_measurement()
-        if self.lockstep:
-            self.step_timer.reset()
 
     def _finish(self):
         self.step_timer.cancel()
+        # what was published reaches its subscribers (a recorder) before the node exits
+        for pub in (*self.publishers_by_topic.values(), self.diagnostics_pub):
+            pub.wait_for_all_acked(self.ack_timeout)
         wall = time.monotonic() - self.wall_start
+        c = self.counters
         self.get_logger().info(
-            f"duration {self.config.duration} s reached after {self.counters['steps']} steps "
-            f"in {wall:.1f} s wall time; {self.counters['command_timeouts']} command "
-            f"timeouts, {self.counters['refused_commands']} refused commands")
+            f"duration {self.config.duration} s reached after {c['steps']} steps "
+            f"in {wall:.1f} s wall time; {c['command_timeouts']} command timeouts, "
+            f"{c['refused_commands']} refused commands, {c['stale_commands']} stale commands, "
+            f"{c['frame_delivery_timeouts']} frame delivery timeouts, "
+            f"{c['detector_timeouts']} detector timeouts")
         self.finished.set_result(True)
 
     # -- outputs -----------------------------------------------------------------
     def _publish_measurement(self):
         meas = self.measurement = self.sim.measure()
+        if self.rendered:
+            for topic, msg in m.camera_outputs(self.msgs, meas, self.sim.camera):
+                self.publishers_by_topic[topic].publish(msg)
+            if self.lockstep and meas.image is not None:
+                self.awaiting_detection = m.time_to_ns(meas.feature_stamp)
+                self.detector_timer.reset()
+                return
+        self._publish_state(meas)
+
+    def _on_detected(self, msg):
+        if self.awaiting_detection is None or m.stamp_to_ns(msg.stamp) != self.awaiting_detection:
+            return
+        self.detector_timer.cancel()
+        self.awaiting_detection = None
+        self._publish_state(self.measurement)
+
+    def _on_detector_timeout(self):
+        self.detector_timer.cancel()
+        if self.awaiting_detection is None or self.finished.done():
+            return
+        self.counters["detector_timeouts"] += 1
+        self.problem = (f"the detector did not process the frame captured at "
+                        f"{self.awaiting_detection * 1e-9:.3f} s within "
+                        f"{self.config['detector_timeout']} s")
+        self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+        self.awaiting_detection = None
+        self._publish_state(self.measurement)
+
+    def _publish_state(self, meas):
+        """The frame (points mode), delivered first in lockstep, then the joint state."""
         t = meas.t
         for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
-            self.publishers_by_topic[topic].publish(msg)
+            pub = self.publishers_by_topic[topic]
+            pub.publish(msg)
+            if topic == FEATURES_TOPIC and self.lockstep and self.config["frame_ack"]:
+                self._wait_delivered(pub, meas.feature_stamp)
         if meas.problems:
             self.problem = "; ".join(meas.problems)
         self._publish_diagnostics(t)
         if self.render_every and self.counters["steps"] % self.render_every == 0:
             self._publish_image(meas)
+        if self.lockstep:
+            self.step_ns = m.time_to_ns(t)
+            self.step_timer.reset()
+
+    def _wait_delivered(self, pub, stamp):
+        if pub.wait_for_all_acked(self.ack_timeout):
+            return
+        self.counters["frame_delivery_timeouts"] += 1
+        self.problem = (f"frame captured at {stamp:.3f} s not acknowledged by every subscriber "
+                        f"within {self.config.command_timeout} s: the joint state may overtake it")
+        self.get_logger().error(self.problem, throttle_duration_sec=1.0)
 
     def _publish_diagnostics(self, t):
         level = "WARN" if self.problem else "OK"
@@ -251,21 +422,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = SimNode()
-    except (ConfigError, ValueError) as exc:
-        rclpy.logging.get_logger("sim_node").fatal(f"invalid configuration: {exc}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin_until_future_complete(node, node.finished)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SimNode, SIM_SECTION, args, (ConfigError, ValueError))
 
 
 if __name__ == "__main__":

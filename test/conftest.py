@@ -24,6 +24,7 @@ known, for the feature detector's tests.
 """
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -117,3 +118,29 @@ def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
         rows, cols = np.nonzero(inside)
         centroids.append([xs[cols].mean(), ys[rows].mean()])
     return np.rint(picture).astype(np.uint8), np.array(centroids)
+
+
+def bag_messages(path, topic):
+    """{header stamp [ns]: message} of ``topic`` in a rosbag2 (folder or .mcap file)."""
+    from rosbags.highlevel import AnyReader
+
+    from visual_adaptive_servo.messages import stamp_to_ns
+
+    found = {}
+    with AnyReader([Path(path)]) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        for connection, _, raw in reader.messages(connections=connections):
+            msg = reader.deserialize(raw, connection.msgtype)
+            found[stamp_to_ns(msg.header.stamp)] = msg
+    return found
+
+
+def bag_counts(path):
+    """{topic: message count} of a rosbag2 (folder or .mcap file)."""
+    from rosbags.highlevel import AnyReader
+
+    counts = {}
+    with AnyReader([Path(path)]) as reader:
+        for connection in reader.connections:
+            counts[connection.topic] = counts.get(connection.topic, 0) + connection.msgcount
+    return counts

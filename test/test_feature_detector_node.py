@@ -71,12 +71,14 @@ class Probe:
     def __init__(self, context):
         self.node = rclpy.create_node("probe", context=context)
         self.msgs = msgs = m.rclpy_messages()
-        self.features, self.statuses, self.overlays = [], [], []
+        self.features, self.statuses, self.overlays, self.processed = [], [], [], []
         self.camera = self.node.create_publisher(msgs.Image, "/camera/image_raw", 10)
         self.desired = self.node.create_publisher(msgs.PolygonStamped,
                                                   "/controller_node/desired", 10)
         self.node.create_subscription(msgs.PolygonStamped, "/camera/features",
                                       self.features.append, 10)
+        self.node.create_subscription(msgs.Header, "/feature_detector/processed",
+                                      self.processed.append, 10)
         self.node.create_subscription(
             msgs.DiagnosticArray, "/diagnostics",
             lambda msg: self.statuses.extend(s for s in msg.status
@@ -111,6 +113,8 @@ def test_features_of_an_image_carry_its_stamp_and_frame(context):
         probe.publish_image(image)
         _spin(context, [node, probe.node], lambda: probe.features and probe.statuses, 10.0)
         assert len(probe.features) == 1
+        _spin(context, [node, probe.node], lambda: probe.processed, 10.0)
+        assert [(p.stamp.sec, p.stamp.nanosec) for p in probe.processed] == [STAMP]
         msg = probe.features[0]
         assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == STAMP
         assert msg.header.frame_id == "camera_optical"
@@ -136,6 +140,9 @@ def test_frame_with_a_missing_marker_gives_no_features_and_a_warning(context):
         _spin(context, [node, probe.node], lambda: probe.statuses, 10.0)
         _spin(context, [node, probe.node], lambda: False, 0.3)   # nothing else may come
         assert probe.features == []
+        # lockstep: the simulator hears at once that this frame has no features
+        assert [(p.stamp.sec, p.stamp.nanosec, p.frame_id) for p in probe.processed] == \
+            [STAMP + ("camera_optical",)]
         status = probe.statuses[-1]
         assert status.level in (1, b"\x01")
         assert status.message.startswith("marker 2 missing: no pixel within tolerance")

@@ -25,6 +25,7 @@ import importlib.util
 import numpy as np
 import pytest
 
+from sim_bridge.camera import PinholeCamera
 from visual_adaptive_servo import messages as m
 from visual_adaptive_servo.models import make_model
 from visual_adaptive_servo.recording import TOPICS
@@ -60,7 +61,16 @@ def _examples(msgs):
                                                  "torque saturated", {"status": "ok"})),
         ("Image", m.image_to_msg(msgs, 0.1, np.arange(2 * 3 * 3, dtype=np.uint8)
                                  .reshape(2, 3, 3))),
+        ("CameraInfo", m.camera_info_to_msg(msgs, 0.1, _camera())),
+        ("JointState", m.effort_command_to_msg(msgs, m.time_to_stamp(msgs, 0.015), NAMES,
+                                               [1.5, -2.0, 72.0])),
     ]
+
+
+def _camera():
+    """The paper's camera: f beta = 135 px, principal point (320, 240), 640 x 480."""
+    return PinholeCamera.look_at([-5.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 135.0,
+                                 135.0, 320.0, 240.0, 640, 480, (320.0, 240.0), (-1.0, -1.0))
 
 
 def test_joint_state_round_trip_reorders_to_the_requested_names(msgs):
@@ -95,6 +105,50 @@ def test_features_round_trip_one_point_per_feature(msgs):
     t, back = m.features_from_msg(msg)
     assert t == pytest.approx(2.005, abs=1e-9)
     np.testing.assert_allclose(back, pixels)   # Point32 holds float32: these are exact
+
+
+def test_camera_info_holds_the_pinhole_intrinsics(msgs):
+    camera = _camera()
+    msg = m.camera_info_to_msg(msgs, 2.005, camera)
+    assert (msg.width, msg.height, msg.distortion_model) == (640, 480, "plumb_bob")
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == \
+        (2, 5_000_000, "camera")
+    K, P = np.reshape(msg.k, (3, 3)), np.reshape(msg.p, (3, 4))
+    np.testing.assert_array_equal(K, [[135.0, 0.0, 320.0], [0.0, 135.0, 240.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(P, np.hstack([K, np.zeros((3, 1))]))
+    np.testing.assert_array_equal(np.reshape(msg.r, (3, 3)), np.eye(3))
+    np.testing.assert_array_equal(msg.d, np.zeros(5))
+    # oracle: K projects a point in the camera frame to the raw pixel the camera computes
+    point = np.array([0.3, 0.7, 0.2])
+    raw = camera.to_raw(camera.project(point[None, :])[0])[0]
+    h = K @ (camera.rotation @ (point - camera.position))
+    np.testing.assert_allclose(h[:2] / h[2], raw, atol=1e-9)
+
+
+def test_effort_command_carries_the_answered_stamp_exactly(msgs):
+    stamp = msgs.Time(sec=1_700_000_000, nanosec=123_456_789)
+    msg = m.effort_command_to_msg(msgs, stamp, ["b", "a"], [2.0, 1.0])
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert len(msg.position) == len(msg.velocity) == 0
+    stamp_ns, tau = m.effort_command_from_msg(msg, ["a", "b"])
+    assert stamp_ns == 1_700_000_000_123_456_789
+    np.testing.assert_array_equal(tau, [1.0, 2.0])
+    with pytest.raises(ValueError, match=r"missing joint\(s\) \['c'\]"):
+        m.effort_command_from_msg(msg, ["a", "c"])
+
+
+@pytest.mark.parametrize("t", [0.015, 0.005 * 3, 0.005 * 601, 29.995, 1234.567891])
+def test_received_time_is_what_a_stamp_of_t_reads(msgs, t):
+    assert m.received_time(t) == m.stamp_to_time(m.time_to_stamp(msgs, t))
+
+
+def test_received_pixels_are_what_a_subscriber_reads_after_serialisation(bags):
+    pixels = np.array([65.123456789, -10.987654321])
+    typename = m.MESSAGE_TYPES["PolygonStamped"]
+    raw = bags.typestore.serialize_cdr(m.features_to_msg(bags, 0.0, pixels), typename)
+    carried = m.features_from_msg(bags.typestore.deserialize_cdr(raw, typename))[1]
+    np.testing.assert_array_equal(m.received_pixels(pixels), carried)
+    assert np.all(carried != pixels)
 
 
 def test_labelled_float_array_round_trip(msgs):

@@ -17,9 +17,10 @@
 Needs a sourced ROS 2 Jazzy (skipped otherwise).  Each test runs in its own
 rclpy context on a private ROS domain, with the nodes in one
 SingleThreadedExecutor.  The oracle for the lockstep loop is the in-process
-runner: both step the same simulator and controller in the same order, so
-the tracking error through ROS must match the one of ``vas run`` (up to the
-float32 of geometry_msgs/Point32 that carries the pixels).
+runner: both step the same simulator and controller in the same order and
+``vas run`` reads pixels and times as the messages carry them (float32,
+integer nanoseconds), so the tracking error through ROS must equal the one
+``vas run`` records, sample by sample.
 """
 
 import os
@@ -33,8 +34,8 @@ rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
+from conftest import bag_messages  # noqa: E402
 from sim_bridge.sim_node import SimNode  # noqa: E402
-from sim_bridge.simulator import Simulator  # noqa: E402
 from visual_adaptive_servo import messages as m  # noqa: E402
 from visual_adaptive_servo.config import (  # noqa: E402
     CONTROLLER_PARAMS,
@@ -42,13 +43,12 @@ from visual_adaptive_servo.config import (  # noqa: E402
     SIM_PARAMS,
     SIM_SECTION,
     ConfigError,
-    ControllerConfig,
-    SimConfig,
+    load_scenario,
     read_param_file,
 )
-from visual_adaptive_servo.controller import AdaptiveVisualTracker  # noqa: E402
 from visual_adaptive_servo.controller_node import ControllerNode  # noqa: E402
 from visual_adaptive_servo.ros_params import to_ros  # noqa: E402
+from visual_adaptive_servo.runner import run_scenario  # noqa: E402
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
                       "paper_3dof.yaml")
@@ -92,17 +92,22 @@ class Probe:
     def __init__(self, context):
         self.node = rclpy.create_node("probe", context=context)
         msgs = m.rclpy_messages()
-        self.errors, self.commands, self.diagnostics = {}, [], []
+        self.errors, self.commands, self.stamped, self.diagnostics = {}, [], [], []
         self.node.create_subscription(msgs.PolygonStamped, "/controller_node/tracking_error",
                                       self._on_error, 100)
         self.node.create_subscription(msgs.Float64MultiArray, "/effort_controller/commands",
                                       lambda msg: self.commands.append(np.array(msg.data)), 100)
+        self.node.create_subscription(msgs.JointState, "/controller_node/effort_command",
+                                      self.stamped.append, 100)
         self.node.create_subscription(msgs.DiagnosticArray, "/diagnostics",
                                       lambda msg: self.diagnostics.extend(msg.status), 100)
 
     def _on_error(self, msg):
-        t, err = m.features_from_msg(msg)
-        self.errors[round(t, 6)] = err
+        self.errors[m.stamp_to_ns(msg.header.stamp)] = m.features_from_msg(msg)[1]
+
+    def last_values(self, name):
+        status = [s for s in self.diagnostics if s.name == name][-1]
+        return {kv.key: kv.value for kv in status.values}
 
 
 def _spin(context, nodes, until, timeout):
@@ -115,26 +120,23 @@ def _spin(context, nodes, until, timeout):
     executor.shutdown()
 
 
-def _reference_errors(sections, duration):
-    """Tracking error x - x_d of the in-process loop, by time (what vas run computes)."""
-    sim = Simulator(SimConfig.from_params(sections[SIM_SECTION]))
-    ctl = AdaptiveVisualTracker(ControllerConfig.from_params(sections[CONTROLLER_SECTION]))
-    errors = {}
-    try:
-        for _ in range(round(duration / sim.config.control_period)):
-            meas = sim.measure()
-            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels)
-            errors[round(meas.t, 6)] = res.error
-            sim.apply(res.tau)
-    finally:
-        sim.close()
-    return errors
+def _reference_errors(tmp_path, changes, duration):
+    """{stamp [ns]: x - x_d} that ``vas run`` records for the same parameters."""
+    scenario = load_scenario(CONFIG, [f"{key.replace('__', '.').replace('_DOT_', '.')}={value}"
+                                      for key, value in changes.items()])
+    run_scenario(scenario, str(tmp_path), duration=duration, progress=False, plots=False)
+    return {stamp: m.features_from_msg(msg)[1] for stamp, msg in
+            bag_messages(tmp_path / "run.mcap", "/controller_node/tracking_error").items()}
 
 
-def test_lockstep_loop_tracks_like_the_in_process_runner(context):
+@pytest.mark.parametrize("camera", [
+    {},
+    {"sim_node__camera_rate": 40.0, "sim_node__camera_latency": 0.03},
+], ids=["paper", "40Hz_camera_30ms_late"])
+def test_lockstep_loop_equals_the_in_process_runner(context, tmp_path, camera):
     duration = 2.0
-    sections = _sections(sim_node__duration=duration)
-    sim, ctl = _make_nodes(context, sections)
+    changes = dict(camera, sim_node__duration=duration)
+    sim, ctl = _make_nodes(context, _sections(**changes))
     probe = Probe(context)
     try:
         _spin(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=120.0)
@@ -142,22 +144,38 @@ def test_lockstep_loop_tracks_like_the_in_process_runner(context):
         # let the last messages arrive
         _spin(context, [probe.node], lambda: False, timeout=0.3)
         steps = round(duration / 0.005)
-        assert sim.counters == {"steps": steps, "command_timeouts": 0, "refused_commands": 0}
+        assert sim.counters == {"steps": steps, "command_timeouts": 0, "refused_commands": 0,
+                                "stale_commands": 0, "frame_delivery_timeouts": 0,
+                                "detector_timeouts": 0}
         assert ctl.samples == steps
-        assert len(probe.commands) == steps
+        assert len(probe.commands) == len(probe.stamped) == steps
+        assert [m.stamp_to_ns(c.header.stamp) for c in probe.stamped] == \
+            [k * 5_000_000 for k in range(steps)]
         tau = np.array(probe.commands)
         assert np.all(np.isfinite(tau)) and np.max(np.abs(tau)) > 1.0
-        assert len(probe.errors) == steps
-        reference = _reference_errors(sections, duration)
-        times = sorted(reference)
-        ros_err = np.linalg.norm([probe.errors[t] for t in times], axis=1)
-        ref_err = np.linalg.norm([reference[t] for t in times], axis=1)
-        np.testing.assert_allclose(ros_err, ref_err, atol=1e-3)
+        np.testing.assert_array_equal([c.effort for c in probe.stamped], tau)
+
+        reference = _reference_errors(tmp_path, changes, duration)
+        # until the first frame arrives the samples are rejected: no tracking error
+        waiting = round(camera.get("sim_node__camera_latency", 0.0) / 0.005)
+        assert len(reference) == steps - waiting
+        assert sorted(probe.errors) == sorted(reference)
+        stamps = sorted(reference)
+        np.testing.assert_allclose([probe.errors[s] for s in stamps],
+                                   [reference[s] for s in stamps], rtol=0.0, atol=1e-6)
+        ros_err = np.linalg.norm([probe.errors[s] for s in stamps], axis=1)
         assert np.max(ros_err) < 3.0
-        assert np.max(ros_err[times.index(1.0):]) < 1.0
+        assert np.max(ros_err[stamps.index(1_000_000_000):]) < 1.0
         levels = {s.name: s.level for s in probe.diagnostics}
         assert levels.get("controller_node") in (0, b"\x00")
         assert levels.get("sim_node") in (0, b"\x00")
+        frames = probe.last_values("controller_node")
+        if camera:
+            assert int(frames["frames_late"]) == int(frames["frames_applied"]) > 30
+            assert float(frames["frame_age_max"]) == pytest.approx(0.03, abs=1e-9)
+        else:
+            assert frames["frames_late"] == "0" and float(frames["frame_age_max"]) == 0.0
+        assert frames["frames_dropped"] == "0"
     finally:
         probe.node.destroy_node()
         ctl.destroy_node()

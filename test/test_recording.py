@@ -78,7 +78,7 @@ class ReferenceRecorder:
         t = meas.t
         for topic, msg in m.sim_outputs(self.msgs, meas, self.names):
             self.write(topic.replace("~", SIM_NS), t, msg)
-        for topic, msg in m.controller_outputs(self.msgs, res, self.labels):
+        for topic, msg in m.controller_outputs(self.msgs, res, self.labels, self.names):
             self.write(topic.replace("~", CONTROLLER_NS), t, msg)
         if diagnostics_due:
             level, message, values = health(res)

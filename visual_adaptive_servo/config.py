@@ -184,8 +184,21 @@ SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "
     ParamSpec("timing_mode", "lockstep", "str",
               "lockstep: wait for the command answering each state; realtime: wall-clock timer."),
     ParamSpec("command_timeout", 1.0, "float",
-              "lockstep: wall time to wait for a command before applying zero torque [s].",
+              "lockstep: wall time to wait for a command before applying zero torque (and, "
+              "with frame_ack, for a frame's acknowledgement) [s].", 1e-3, 60.0),
+    ParamSpec("frame_ack", False, "bool",
+              "lockstep: after publishing a camera frame, wait until every subscriber has "
+              "acknowledged it before the joint state follows (wait_for_all_acked). Costs up to "
+              "a DDS heartbeat period per frame (about 100 ms with Cyclone DDS's defaults); "
+              "without it the frame is published first and, on one host, arrives first."),
+    ParamSpec("detector_timeout", 0.5, "float",
+              "lockstep, rendered: wall time to wait for the feature detector to have processed "
+              "a picture (/feature_detector/processed) before the joint state follows [s].",
               1e-3, 60.0),
+    ParamSpec("start.wait_for_recorder", False, "bool",
+              "Start only once every recorded topic (visual_adaptive_servo.recording.TOPICS) "
+              "has a subscriber and /joint_states, /clock and the features have two (the "
+              "controller's and a recorder's); ros2 launch sets it with record:=true."),
     ParamSpec("render.enabled", False, "bool", "Publish the camera view on ~/image."),
     ParamSpec("render.rate", 10.0, "float", "Rendering rate [Hz].", 0.1, 60.0),
     ParamSpec("render.width", 320, "int", "Rendered image width [px].", 16, 1920),

@@ -754,3 +754,20 @@ def health(result):
     if notes:
         return "WARN", ", ".join(notes), values
     return "OK", "tracking", values
+
+
+def frame_values(frames, superseded=0):
+    """/diagnostics values of the camera frames: ages [s] and counts.
+
+    ``frames`` is :attr:`AdaptiveVisualTracker.frames`; ``superseded`` counts the
+    frames a node received but never passed on, because a newer one came before
+    the next joint sample.  Dropped = refused by the tracker + superseded.
+    """
+    applied = frames["applied"]
+    mean = frames["age_sum"] / applied if applied else float("nan")
+    return {"frames_applied": applied, "frames_late": frames["late"],
+            "frames_dropped": frames["rejected"] + superseded,
+            "frames_superseded": superseded,
+            "frame_age_last": f"{frames['last_age']:.6g}",
+            "frame_age_mean": f"{mean:.6g}",
+            "frame_age_max": f"{frames['age_max'] if applied else float('nan'):.6g}"}

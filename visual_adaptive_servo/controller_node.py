@@ -20,21 +20,29 @@ messages into arrays and back (:mod:`.messages`) and calls
 
 Topics (DESIGN.md section 2)
 ----------------------------
-in:  ``/joint_states`` (sensor_msgs/JointState, joints picked by ``joint_names``),
-     ``/camera/features`` (geometry_msgs/PolygonStamped, pixels, origin on the optical axis)
+in:  ``/camera/features`` (geometry_msgs/PolygonStamped, pixels, origin on the optical
+     axis, stamp = capture time), ``/joint_states`` (sensor_msgs/JointState, joints
+     picked by ``joint_names``)
 out: ``/effort_controller/commands`` (std_msgs/Float64MultiArray, one torque per joint in
      ``joint_names`` order: the ros2_control JointGroupEffortController convention),
      ``~/desired``, ``~/observed``, ``~/tracking_error`` (PolygonStamped: x_d, x_o, x - x_d),
-     ``~/estimated_depth``, ``~/parameters`` (Float64MultiArray, labelled), ``/diagnostics``.
+     ``~/estimated_depth``, ``~/parameters`` (Float64MultiArray, labelled), ``/diagnostics``
+     (with the frame ages and counts), and last ``~/effort_command`` (sensor_msgs/JointState:
+     the same torques in ``effort``, ``name`` = ``joint_names``, stamped with the joint state
+     it answers: the simulator in lockstep applies a command only to that state).
 
-Pairing: the newest unprocessed joint state is paired with the newest
-unprocessed feature; a sample is processed when both have arrived, at the
-joint state's stamp.  A joint state that finds no feature within one
-``sample_time`` of wall time is processed without one (the tracker then holds
-its last command and falls back safely, see ``safety.*``); a joint state that
-cannot be converted is processed as a rejected sample.
+One sample per joint state: the tracker runs at every /joint_states message,
+at its stamp, with the newest camera frame received since the last sample that
+was captured at or before it (older ones are counted as superseded; a frame
+stamped after the joint state waits for the next one).  Frames come at the
+camera's rate, late by its latency: with ``latency_compensation`` the tracker
+predicts between frames and applies late frames at their capture time.  The
+features subscription is created before the joint-state one, so when both are
+waiting the executor takes the frame first; the simulator in lockstep delivers
+the frame before the joint state, so the pairing does not depend on timing.  A
+joint state that cannot be converted is processed as a rejected sample.
 
-QoS: the command is published reliable (depth 10).  With
+QoS: the commands are published reliable (depth 10).  With
 ``timing_mode: lockstep`` every subscription is reliable (depth 10): the
 simulator waits for each command, so nothing may be lost.  With
 ``timing_mode: realtime`` the measurements are sensor data (best effort,
@@ -52,12 +60,8 @@ from __future__ import annotations
 
 import logging
 import sys
-import time
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -69,11 +73,13 @@ from .config import (
     ControllerConfig,
     build_controller_model,
 )
-from .controller import AdaptiveVisualTracker, health
+from .controller import AdaptiveVisualTracker, frame_values, health
+from .ros_main import run_node
 from .ros_params import declare_schema, from_ros
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
+MAX_PENDING_FRAMES = 100   # frames kept while waiting for a joint state (more: superseded)
 
 
 class RosLogHandler(logging.Handler):
@@ -121,22 +127,20 @@ class ControllerNode(Node):
                                 ("~/observed", "PolygonStamped"),
                                 ("~/tracking_error", "PolygonStamped"),
                                 ("~/estimated_depth", "Float64MultiArray"),
-                                ("~/parameters", "Float64MultiArray"))}
+                                ("~/parameters", "Float64MultiArray"),
+                                ("~/effort_command", "JointState"))}
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
-        self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
-                                 measurement_qos)
+        # frames before joint states: the executor serves ready subscriptions in creation
+        # order, so a frame that is waiting is always taken before the joint state
         self.create_subscription(msgs.PolygonStamped, "/camera/features", self._on_features,
                                  measurement_qos)
-        # wall clock: with use_sim_time a ROS-time timer would stop while the
-        # simulator waits for our command
-        self.create_timer(config.sample_time, self._on_pair_timeout,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
+                                 measurement_qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.pending_state = None      # newest unprocessed JointState
-        self.pending_since = None      # wall time the oldest unprocessed one arrived
-        self.pending_feature = None    # newest unprocessed PolygonStamped
+        self.pending_frames = []       # (stamp ns, PolygonStamped) not yet passed on
+        self.superseded = 0
         self.last_status = None
         self.t_last_diagnostics = None
         self.samples = 0
@@ -146,50 +150,49 @@ class ControllerNode(Node):
                                f"timing_mode {config.timing_mode}")
 
     # -- inputs ------------------------------------------------------------------
-    def _on_joint_state(self, msg):
-        if self.pending_state is None:
-            self.pending_since = time.monotonic()
-        self.pending_state = msg
-        self._process_if_paired()
-
     def _on_features(self, msg):
-        self.pending_feature = msg
-        self._process_if_paired()
+        self.pending_frames.append((m.stamp_to_ns(msg.header.stamp), msg))
+        if len(self.pending_frames) > MAX_PENDING_FRAMES:
+            del self.pending_frames[0]
+            self.superseded += 1
 
-    def _process_if_paired(self):
-        if self.pending_state is not None and self.pending_feature is not None:
-            self._process(self.pending_state, self.pending_feature)
+    def _take_frame(self, stamp_ns):
+        """The newest pending frame captured at or before ``stamp_ns``; the rest stay."""
+        due = [item for item in self.pending_frames if item[0] <= stamp_ns]
+        if not due:
+            return None
+        self.pending_frames = [item for item in self.pending_frames if item[0] > stamp_ns]
+        self.superseded += len(due) - 1
+        return max(due, key=lambda item: item[0])[1]
 
-    def _on_pair_timeout(self):
-        waited = (time.monotonic() - self.pending_since) if self.pending_state is not None else 0.0
-        if waited >= self.tracker.config.sample_time:
-            self._process(self.pending_state, None)
-
-    # -- one sample --------------------------------------------------------------
-    def _process(self, state_msg, feature_msg):
-        self.pending_state, self.pending_feature, self.pending_since = None, None, None
+    def _on_joint_state(self, state_msg):
+        frame_msg = self._take_frame(m.stamp_to_ns(state_msg.header.stamp))
         t = m.stamp_to_time(state_msg.header.stamp)
         try:
             t, q, qd = m.joint_state_from_msg(state_msg, self.joint_names)
         except ValueError as exc:
             self.get_logger().error(str(exc), throttle_duration_sec=1.0)
             q = qd = None
-        x = m.features_from_msg(feature_msg)[1] if feature_msg is not None else None
-        result = self.tracker.step(t, q, qd, x)
+        x = x_stamp = None
+        if frame_msg is not None:
+            x_stamp, x = m.features_from_msg(frame_msg)
+        result = self.tracker.step(t, q, qd, x, x_stamp)
         self.samples += 1
-        self._publish(result)
+        self._publish(result, state_msg.header.stamp)
 
-    def _publish(self, res):
+    # -- one sample's outputs ----------------------------------------------------
+    def _publish(self, res, stamp):
         msgs, t = self.msgs, res.t
-        for topic, msg in m.controller_outputs(msgs, res, self.labels):
-            self.publishers_by_topic[topic].publish(msg)
         if (res.status != self.last_status or self.t_last_diagnostics is None
                 or t - self.t_last_diagnostics >= DIAGNOSTICS_PERIOD - 1e-9):
             level, message, values = health(res)
+            values.update(frame_values(self.tracker.frames, self.superseded))
             self.diagnostics_pub.publish(m.diagnostics_to_msg(
                 msgs, t, "controller_node", level, message, values, "controller"))
             self.t_last_diagnostics = t
         self.last_status = res.status
+        for topic, msg in m.controller_outputs(msgs, res, self.labels, self.joint_names, stamp):
+            self.publishers_by_topic[topic].publish(msg)
 
     # -- parameters --------------------------------------------------------------
     def _on_set_parameters(self, parameters):
@@ -217,21 +220,7 @@ class ControllerNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = ControllerNode()
-    except ConfigError as exc:
-        rclpy.logging.get_logger("controller_node").fatal(f"invalid configuration: {exc}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ControllerNode, CONTROLLER_SECTION, args)
 
 
 if __name__ == "__main__":

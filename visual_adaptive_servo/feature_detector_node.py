@@ -33,12 +33,25 @@ out: ``/camera/features`` (geometry_msgs/PolygonStamped, one Point32 (u, v, 0) p
      ``/diagnostics`` (name ``feature_detector``): WARN with the reason when a
      frame gives no features, OK when it does; published when the level changes
      and otherwise at most once a second (wall time), with the counters
-     ``frames``, ``frames_without_features`` and ``last_reason``.
+     ``frames``, ``frames_without_features`` and ``last_reason``;
+     lockstep only: ``~/processed`` (std_msgs/Header, the image's stamp and
+     frame_id) once per image, after the features (see below).
 
 QoS: ``timing_mode: lockstep`` makes the image subscription and the features
 (and overlay) publishers reliable (depth 10), ``realtime`` makes them sensor
 data (best effort, depth 5), as for the other nodes' measurements; the
 controller and the camera driver must use the same.
+
+Lockstep (the simulator's rendered mode): after each image, features or not,
+the node publishes ``~/processed`` (std_msgs/Header with the image's stamp),
+after the features.  The simulator waits for it before it publishes the joint
+state, so the features leave this process before the simulator even hears
+that they exist: on one host they reach the controller before the joint
+state does, however the processes are scheduled.  (Waiting for the features
+themselves would not do: one write goes to the simulator and to the controller
+one after the other, and a preemption in between let the joint state overtake
+the controller's copy in 1 of 400 frames here.)  A frame without features
+costs the simulator no wait.
 
 Runtime parameters: ``markers.colors`` (the number of markers cannot change),
 ``markers.tolerance`` and ``blob_area`` can be set while running, for tuning
@@ -51,9 +64,7 @@ from __future__ import annotations
 import sys
 import time
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -61,6 +72,7 @@ from . import messages as m
 from .config import DETECTOR_PARAMS, DETECTOR_SECTION, ConfigError
 from .detection import DetectorConfig, detect, image_points
 from .overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
+from .ros_main import run_node
 from .ros_params import declare_schema, from_ros
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -77,8 +89,11 @@ class FeatureDetectorNode(Node):
         self.config = DetectorConfig.from_params(self.params)
         self.msgs = msgs = m.rclpy_messages()
 
-        qos = RELIABLE if self.params["timing_mode"] == "lockstep" else qos_profile_sensor_data
+        self.lockstep = self.params["timing_mode"] == "lockstep"
+        qos = RELIABLE if self.lockstep else qos_profile_sensor_data
         self.features_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features", qos)
+        self.processed_pub = (self.create_publisher(msgs.Header, "~/processed", RELIABLE)
+                              if self.lockstep else None)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         self.overlay_pub = None
@@ -106,16 +121,18 @@ class FeatureDetectorNode(Node):
             _, rgb = m.image_from_msg(msg)
         except ValueError as exc:
             self._no_features(msg, str(exc))
-            return
-        result = detect(rgb, self.config)
-        if result.pixels is None:
-            self._no_features(msg, result.reason)
         else:
-            self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
-                                                           result.pixels))
-            self._publish_diagnostics(msg, "OK", f"{self.config.m} marker(s) found")
-        if self.overlay_pub is not None and self.overlay_pub.get_subscription_count() > 0:
-            self._publish_overlay(msg, rgb, result.pixels)
+            result = detect(rgb, self.config)
+            if result.pixels is None:
+                self._no_features(msg, result.reason)
+            else:
+                self.features_pub.publish(m.features_for_image(self.msgs, msg.header,
+                                                               result.pixels))
+                self._publish_diagnostics(msg, "OK", f"{self.config.m} marker(s) found")
+            if self.overlay_pub is not None and self.overlay_pub.get_subscription_count() > 0:
+                self._publish_overlay(msg, rgb, result.pixels)
+        if self.processed_pub is not None:
+            self.processed_pub.publish(m.copy_header(self.msgs, msg.header))
 
     def _no_features(self, msg, reason):
         self.counters["frames_without_features"] += 1
@@ -178,21 +195,7 @@ class FeatureDetectorNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = FeatureDetectorNode()
-    except ConfigError as exc:
-        rclpy.logging.get_logger(DETECTOR_SECTION).fatal(f"invalid configuration: {exc}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(FeatureDetectorNode, DETECTOR_SECTION, args)
 
 
 if __name__ == "__main__":

@@ -25,8 +25,17 @@ Topic content (see DESIGN.md section 2):
 
 * ``/camera/features``: PolygonStamped, one Point32 per feature (x=u px, y=v px, z=0)
 * ``/camera/image_raw``: Image, read in rgb8, bgr8, rgba8 or bgra8 (:func:`image_from_msg`)
+* ``/camera/camera_info``: CameraInfo of the simulated pinhole camera (:func:`camera_info_to_msg`)
 * ``/joint_states``: JointState with position, velocity and the applied effort
+* ``/controller_node/effort_command``: JointState with the torques in ``effort``, stamped
+  with the joint state it answers (:func:`effort_command_to_msg`)
 * Float64MultiArray: one dimension whose label lists the entries, comma-separated
+
+What a message carries is not exactly what was put in: times travel as integer
+nanoseconds and pixels as float32 (geometry_msgs/Point32).  :func:`received_time`
+and :func:`received_pixels` give what a subscriber reads; ``vas run`` feeds its
+controller through them, so the in-process loop computes what the nodes compute,
+bit for bit.
 """
 
 from __future__ import annotations
@@ -43,6 +52,8 @@ MESSAGE_TYPES = {
     "Header": "std_msgs/msg/Header",
     "JointState": "sensor_msgs/msg/JointState",
     "Image": "sensor_msgs/msg/Image",
+    "RegionOfInterest": "sensor_msgs/msg/RegionOfInterest",
+    "CameraInfo": "sensor_msgs/msg/CameraInfo",
     "Point32": "geometry_msgs/msg/Point32",
     "Polygon": "geometry_msgs/msg/Polygon",
     "PolygonStamped": "geometry_msgs/msg/PolygonStamped",
@@ -112,6 +123,12 @@ JAZZY_DEFINITIONS = {
                                              "diagnostic_msgs/KeyValue[] values"),
     "diagnostic_msgs/msg/DiagnosticArray": ("std_msgs/Header header\n"
                                             "diagnostic_msgs/DiagnosticStatus[] status"),
+    "sensor_msgs/msg/RegionOfInterest": ("uint32 x_offset\nuint32 y_offset\nuint32 height\n"
+                                         "uint32 width\nbool do_rectify"),
+    "sensor_msgs/msg/CameraInfo": ("std_msgs/Header header\nuint32 height\nuint32 width\n"
+                                   "string distortion_model\nfloat64[] d\nfloat64[9] k\n"
+                                   "float64[9] r\nfloat64[12] p\nuint32 binning_x\n"
+                                   "uint32 binning_y\nsensor_msgs/RegionOfInterest roi"),
 }
 
 
@@ -142,16 +159,42 @@ def rclpy_messages():
                       lambda i: bytes([i]))
 
 
-def time_to_stamp(msgs, t):
-    """Seconds (float) -> builtin_interfaces/Time, rounded to the nanosecond."""
+def time_to_ns(t):
+    """Seconds (float) -> integer nanoseconds, rounded (how a stamp holds a time)."""
     ns = int(round(t * 1e9))
     if ns < 0:
         raise ValueError(f"stamp: negative time {t}")
-    return msgs.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return ns
+
+
+def time_to_stamp(msgs, t):
+    """Seconds (float) -> builtin_interfaces/Time, rounded to the nanosecond."""
+    sec, nanosec = divmod(time_to_ns(t), 1_000_000_000)
+    return msgs.Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_to_ns(stamp):
+    """builtin_interfaces/Time -> integer nanoseconds (exact: compare stamps with this)."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def stamp_to_time(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def received_time(t):
+    """The time a subscriber reads from a stamp of ``t``: seconds -> nanoseconds -> seconds.
+
+    The two can differ in the last bit (5 ms x 3 is 0.015000000000000001 s, its
+    stamp reads 0.015 s), and the controller integrates over differences of them.
+    """
+    sec, nanosec = divmod(time_to_ns(t), 1_000_000_000)
+    return sec + nanosec * 1e-9
+
+
+def received_pixels(pixels):
+    """The pixels (2m,) a subscriber reads from :func:`features_to_msg`: float32, as float64."""
+    return np.asarray(pixels, dtype=np.float32).astype(np.float64)
 
 
 def header(msgs, t, frame_id=""):
@@ -186,6 +229,36 @@ def joint_state_from_msg(msg, names):
                          f"and {len(velocity)} velocities")
     order = [index[name] for name in names]
     return stamp_to_time(msg.header.stamp), position[order], velocity[order]
+
+
+def effort_command_to_msg(msgs, stamp, names, tau):
+    """The stamped command: JointState with ``tau`` (n,) in ``effort``, ``stamp`` a Time.
+
+    ``stamp`` is that of the joint state the command answers, copied field by
+    field, so the simulator can match the two exactly; position and velocity
+    stay empty.
+    """
+    return msgs.JointState(header=msgs.Header(stamp=msgs.Time(sec=stamp.sec,
+                                                              nanosec=stamp.nanosec),
+                                              frame_id=""),
+                           name=list(names), position=msgs.floats([]), velocity=msgs.floats([]),
+                           effort=msgs.floats(tau))
+
+
+def effort_command_from_msg(msg, names):
+    """(stamp in ns, tau (n,) in ``names`` order) of a stamped command.
+
+    Raises ValueError naming the problem when a joint is missing or the number
+    of efforts does not match the names.
+    """
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise ValueError(f"effort command: missing joint(s) {missing}; got {list(msg.name)}")
+    effort = np.asarray(msg.effort, float)
+    if len(effort) != len(msg.name):
+        raise ValueError(f"effort command: {len(msg.name)} names but {len(effort)} efforts")
+    return stamp_to_ns(msg.header.stamp), effort[[index[name] for name in names]]
 
 
 def _polygon(msgs, pixels):
@@ -260,6 +333,24 @@ def image_to_msg(msgs, t, rgb, frame_id="camera"):
                       is_bigendian=0, step=3 * w, data=msgs.uint8s(rgb))
 
 
+def camera_info_to_msg(msgs, t, camera, frame_id="camera"):
+    """sensor_msgs/CameraInfo of a :class:`sim_bridge.camera.PinholeCamera`, stamped t.
+
+    K and P from its intrinsics (fx, fy, cx, cy in raw image coordinates, the
+    ROS convention), R = I, plumb_bob with zero distortion, no binning, no ROI.
+    For image viewers: the controller never reads it (it does not know the camera).
+    """
+    fx, fy, cx, cy = (float(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
+    return msgs.CameraInfo(
+        header=header(msgs, t, frame_id), height=int(camera.height), width=int(camera.width),
+        distortion_model="plumb_bob", d=msgs.floats([0.0] * 5),
+        k=msgs.floats([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]),
+        r=msgs.floats([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        p=msgs.floats([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+        binning_x=0, binning_y=0,
+        roi=msgs.RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+
+
 def _uint8_buffer(data):
     """A flat uint8 view of an Image's ``data``: ndarray (rosbags), array.array (rclpy), bytes."""
     if isinstance(data, (list, tuple)):
@@ -305,22 +396,44 @@ def sim_outputs(msgs, meas, joint_names):
 
     ``meas`` is a :class:`sim_bridge.simulator.Measurement`; ``~`` in a topic
     is the node's namespace.  ``vas run`` records exactly these.
+
+    The camera frame (if one is published now) comes first: ``sim_node`` in
+    lockstep makes sure it has been delivered before it sends the joint state.
+    A frame with NaN pixels (``faults.nan_pixels``) is published as it is, for
+    the controller to refuse.  In rendered mode the frame is a picture, see
+    :func:`camera_outputs`.
     """
     t = meas.t
-    out = [("/clock", clock_to_msg(msgs, t)),
-           ("/joint_states", joint_state_to_msg(msgs, t, joint_names, meas.q, meas.qd,
-                                                meas.tau_applied))]
-    if meas.pixels is not None and np.all(np.isfinite(meas.pixels)):
+    out = []
+    if meas.pixels is not None:
         out.append(("/camera/features", features_to_msg(msgs, meas.feature_stamp, meas.pixels)))
-    out.append(("~/true_depth", float_array_to_msg(msgs, meas.true_depth)))
+    out += [("/clock", clock_to_msg(msgs, t)),
+            ("/joint_states", joint_state_to_msg(msgs, t, joint_names, meas.q, meas.qd,
+                                                 meas.tau_applied)),
+            ("~/true_depth", float_array_to_msg(msgs, meas.true_depth))]
     return out
 
 
-def controller_outputs(msgs, res, labels):
+def camera_outputs(msgs, meas, camera):
+    """(topic, message) pairs of the rendered frame published now (none without a picture).
+
+    ``/camera/image_raw`` (rgb8) and ``/camera/camera_info``, both stamped with
+    the capture time.
+    """
+    if meas.image is None:
+        return []
+    return [("/camera/image_raw", image_to_msg(msgs, meas.feature_stamp, meas.image)),
+            ("/camera/camera_info", camera_info_to_msg(msgs, meas.feature_stamp, camera))]
+
+
+def controller_outputs(msgs, res, labels, names, stamp=None):
     """(topic, message) pairs ``controller_node`` publishes for one :class:`StepResult`.
 
-    The command always; x_d and x - x_d only when defined (a rejected sample has
-    no tracking error).  ``/diagnostics`` is left to the caller's cadence.
+    The commands always; x_d and x - x_d only when defined (a rejected sample has
+    no tracking error).  ``~/effort_command`` (the command stamped with ``stamp``,
+    the Time of the joint state it answers; default: ``res.t``) comes last: when
+    the simulator has it, everything else of the sample has been sent.
+    ``/diagnostics`` is left to the caller's cadence.
     """
     t = res.t
     out = [("/effort_controller/commands", float_array_to_msg(msgs, res.tau))]
@@ -333,6 +446,8 @@ def controller_outputs(msgs, res, labels):
     st = res.state
     out.append(("~/parameters", float_array_to_msg(
         msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels)))
+    out.append(("~/effort_command", effort_command_to_msg(
+        msgs, time_to_stamp(msgs, t) if stamp is None else stamp, names, res.tau)))
     return out
 
 
@@ -353,10 +468,10 @@ def sim_output_arrays(meas):
     into that message's bytes.
     """
     t = meas.t
-    has_frame = np.isfinite(meas.pixels).all(axis=1)
-    return [("/clock", None, t, []),
+    has_frame = np.isfinite(meas.feature_stamp)   # a frame's pixels may be NaN (a fault)
+    return [("/camera/features", has_frame, meas.feature_stamp, [_points(meas.pixels)]),
+            ("/clock", None, t, []),
             ("/joint_states", None, t, [meas.q, meas.qd, meas.tau_applied]),
-            ("/camera/features", has_frame, meas.feature_stamp, [_points(meas.pixels)]),
             ("~/true_depth", None, None, [meas.true_depth])]
 
 
@@ -376,7 +491,8 @@ def controller_output_arrays(res):
             ("~/tracking_error", np.isfinite(res.error).all(axis=1), t, [_points(res.error)]),
             ("~/estimated_depth", None, None, [res.z_hat]),
             ("~/parameters", None, None,
-             [np.concatenate([st.a_z_perp, st.a_z, st.a_d], axis=1)])]
+             [np.concatenate([st.a_z_perp, st.a_z, st.a_d], axis=1)]),
+            ("~/effort_command", None, t, [res.tau])]
 
 
 def _points(pixels):

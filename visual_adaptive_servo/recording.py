@@ -61,6 +61,7 @@ TOPICS = {
     f"{CONTROLLER_NS}/tracking_error": "PolygonStamped",
     f"{CONTROLLER_NS}/estimated_depth": "Float64MultiArray",
     f"{CONTROLLER_NS}/parameters": "Float64MultiArray",
+    f"{CONTROLLER_NS}/effort_command": "JointState",
     "/diagnostics": "DiagnosticArray",
 }
 
@@ -349,7 +350,7 @@ class McapRecorder:
         built = ([(t.replace("~", SIM_NS), msg) for t, msg in m.sim_outputs(
                      self.msgs, meas, joint_names)]
                  + [(t.replace("~", CONTROLLER_NS), msg) for t, msg in m.controller_outputs(
-                     self.msgs, res, labels)])
+                     self.msgs, res, labels, joint_names)])
         self._store(0, meas, res)
         numbers = self._numbers(*self._stacked(1))
         if [topic for topic, _ in built] != [topic for topic, *_ in numbers]:

@@ -33,6 +33,7 @@ import numpy as np
 
 from sim_bridge.simulator import Simulator
 
+from . import messages as m
 from .controller import AdaptiveVisualTracker
 from .recording import McapRecorder, write_csv, write_json
 
@@ -137,13 +138,18 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             meas = truth if faults is None else faults(k, truth)
             if meas.image is not None:
                 meas = detections.detect(meas)
-            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
+            # what controller_node reads from the messages: times from their nanosecond
+            # stamps, pixels as float32 (so this loop and the nodes compute the same)
+            pixels = None if meas.pixels is None else m.received_pixels(meas.pixels)
+            res = ctl.step(m.received_time(meas.t), meas.q, meas.qd, pixels,
+                           None if meas.feature_stamp is None
+                           else m.received_time(meas.feature_stamp))
             counters["rejected"] += res.status != "ok"
             counters["fallback"] += res.status == "fallback"
             counters["saturated"] += res.saturated
             counters["projection_active"] += res.projection_active
             counters["damped"] += res.damped
-            x = meas.pixels if meas.pixels is not None else np.nan
+            x = pixels if pixels is not None else np.nan
             series.add(t=meas.t, x=x, x_true=truth.true_pixels, x_d=res.x_d, x_obs=res.x_obs,
                        z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q, qd=truth.qd,
                        tau=res.tau,

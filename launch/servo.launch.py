@@ -1,0 +1,136 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Any scenario file under ROS 2: sim_node + controller_node (+ feature_detector), recorded.
+
+    ros2 launch visual_adaptive_servo servo.launch.py params_file:=/path/to/scenario.yaml
+    ros2 launch visual_adaptive_servo servo.launch.py timing_mode:=realtime render:=true
+    ros2 launch visual_adaptive_servo servo.launch.py camera_mode:=rendered
+    ros2 launch visual_adaptive_servo servo.launch.py record:=true bag_dir:=/tmp/vas_bag
+
+One parameter file configures every node (default: the installed
+config/paper_3dof.yaml); file names inside it (URDFs, trajectory tables) are
+``package://`` or absolute.  sim_node publishes /clock and runs on wall time
+itself (its timers must run while sim time stands still, so no use_sim_time);
+controller_node uses sim time.  ``camera_mode:=rendered`` (default: the file's
+``sim_node.camera_mode``) makes the simulator publish pictures and starts the
+feature_detector, configured by the file's ``feature_detector`` section.
+When any node exits (sim_node after ``duration`` of simulated time) the launch
+shuts down.  ``record:=true`` runs ``ros2 bag record -s mcap`` on the topics
+``vas run`` records (visual_adaptive_servo.recording.TOPICS) and sets
+``sim_node.start.wait_for_recorder``: the simulation starts once the recorder
+subscribes, and the shutdown waits ``RECORDER_GRACE`` for it to take the last
+messages.  Not ``--use-sim-time``: with it the recorder subscribes nothing
+before /clock has moved, i.e. after the start; the bag's receive times are
+wall time, the messages' header stamps simulated time.
+"""
+
+import os
+
+import yaml
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    ExecuteProcess,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    TimerAction,
+)
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from visual_adaptive_servo.recording import TOPICS
+
+PACKAGE = "visual_adaptive_servo"
+RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
+
+
+def _file_camera_mode(params_file):
+    """``sim_node.camera_mode`` of a parameter file (``points`` when it has none)."""
+    with open(params_file, encoding="utf-8") as handle:
+        data = yaml.safe_load(handle) or {}
+    section = data.get("sim_node") or data.get("/sim_node") or {}
+    return (section.get("ros__parameters") or {}).get("camera_mode", "points")
+
+
+def _nodes(context):
+    params_file = LaunchConfiguration("params_file").perform(context)
+    timing_mode = LaunchConfiguration("timing_mode").perform(context)
+    render = LaunchConfiguration("render").perform(context) == "true"
+    record = LaunchConfiguration("record").perform(context) == "true"
+    camera_mode = (LaunchConfiguration("camera_mode").perform(context)
+                   or _file_camera_mode(params_file))
+
+    nodes = [
+        Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
+             parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
+                                       "render.enabled": render,
+                                       "start.wait_for_recorder": record}]),
+        Node(package=PACKAGE, executable="controller_node", name="controller_node",
+             output="screen",
+             parameters=[params_file, {"timing_mode": timing_mode, "use_sim_time": True}]),
+    ]
+    if camera_mode == "rendered":
+        nodes.append(Node(package=PACKAGE, executable="feature_detector",
+                          name="feature_detector", output="screen",
+                          parameters=[params_file, {"timing_mode": timing_mode}]))
+    actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
+                           f"{camera_mode}")]
+    for node in nodes:
+        shutdown = EmitEvent(event=Shutdown(reason=f"{node.node_executable} exited"))
+        on_exit = [TimerAction(period=RECORDER_GRACE, actions=[shutdown])] if record else \
+            [shutdown]
+        actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
+                                                          on_exit=on_exit)))
+    if record:
+        bag_dir = LaunchConfiguration("bag_dir").perform(context)
+        cmd = ["ros2", "bag", "record", "-s", "mcap"]
+        if bag_dir:
+            cmd += ["-o", bag_dir]
+        cmd += ["--topics"] + sorted(TOPICS)
+        actions += [LogInfo(msg="recording: " + " ".join(cmd)),
+                    ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
+    return nodes + actions
+
+
+def generate_launch_description():
+    default_params = os.path.join(get_package_share_directory(PACKAGE), "config",
+                                  "paper_3dof.yaml")
+    return LaunchDescription([
+        DeclareLaunchArgument("params_file", default_value=default_params,
+                              description="Parameter YAML with sim_node and controller_node "
+                                          "(and feature_detector) sections"),
+        DeclareLaunchArgument("timing_mode", default_value="lockstep",
+                              choices=["lockstep", "realtime"],
+                              description="lockstep: sim waits for each command; realtime: "
+                                          "wall-clock timer (also selects the QoS)"),
+        DeclareLaunchArgument("camera_mode", default_value="",
+                              choices=["", "points", "rendered"],
+                              description="points: the sim publishes /camera/features; "
+                                          "rendered: pictures and the feature_detector; "
+                                          "empty: the params_file's sim_node.camera_mode"),
+        DeclareLaunchArgument("render", default_value="false", choices=["true", "false"],
+                              description="Publish the camera view on /sim_node/image"),
+        DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
+                              description="Record the package topics with ros2 bag (MCAP); "
+                                          "the simulation starts once the recorder listens"),
+        DeclareLaunchArgument("bag_dir", default_value="",
+                              description="Output folder of the recording (must not exist); "
+                                          "empty: rosbag2_<date> in the current folder"),
+        OpaqueFunction(function=_nodes),
+    ])

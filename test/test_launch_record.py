@@ -1,0 +1,124 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""launch_testing: a recorded lockstep launch equals ``vas run``, sample by sample.
+
+``launch/servo.launch.py`` with ``record:=true`` runs the paper's scenario for
+D = 2 s on a private ROS domain.  After shutdown the bag must hold exactly
+D / control_period = 400 commands on both command topics and 400 joint states
+(the recorder listens before the simulation starts, the shutdown waits for it),
+the simulator must report no command timeouts, and the tracking error in the
+bag must equal the one ``vas run`` records for the same file to 1e-6 px at
+every stamp (the oracle: the same simulator and controller in one process,
+fed the pixels and times the messages carry).  Skipped without launch_testing
+or when the package is not installed (colcon build).
+"""
+
+import os
+import tempfile
+import unittest
+
+import numpy as np
+import pytest
+
+pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
+
+import launch_testing.actions
+import launch_testing.asserts
+import yaml
+from ament_index_python.packages import (
+    PackageNotFoundError,
+    get_package_share_directory,
+)
+from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+
+from conftest import bag_counts, bag_messages
+from launch import LaunchDescription
+from visual_adaptive_servo import messages as m
+from visual_adaptive_servo.config import load_scenario
+from visual_adaptive_servo.runner import run_scenario
+
+PACKAGE = "visual_adaptive_servo"
+DURATION = 2.0
+STEPS = 400
+try:
+    SHARE = get_package_share_directory(PACKAGE)
+except PackageNotFoundError:
+    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
+                allow_module_level=True)
+
+
+def _short_params_file(folder):
+    with open(os.path.join(SHARE, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
+        params = yaml.safe_load(handle)
+    params["sim_node"]["ros__parameters"]["duration"] = DURATION
+    path = os.path.join(folder, "paper_2s.yaml")
+    with open(path, "w", encoding="utf-8") as handle:
+        yaml.safe_dump(params, handle)
+    return path
+
+
+@pytest.mark.launch_test
+def generate_test_description():
+    folder = tempfile.mkdtemp(prefix="vas-record-")
+    params_file, bag_dir = _short_params_file(folder), os.path.join(folder, "bag")
+    return LaunchDescription([
+        SetEnvironmentVariable("ROS_DOMAIN_ID", str(100 + os.getpid() % 50)),
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(os.path.join(SHARE, "launch", "servo.launch.py")),
+            launch_arguments={"params_file": params_file, "record": "true",
+                              "bag_dir": bag_dir}.items()),
+        launch_testing.actions.ReadyToTest(),
+    ]), {"params_file": params_file, "bag_dir": bag_dir, "folder": folder}
+
+
+class TestRecordedRun(unittest.TestCase):
+
+    def test_simulator_reaches_its_duration_without_timeouts(self, proc_output, proc_info):
+        proc_output.assertWaitFor("controller connected: simulation starts", timeout=60)
+        proc_output.assertWaitFor(f"duration {DURATION} s reached after {STEPS} steps",
+                                  timeout=120)
+        proc_output.assertWaitFor("0 command timeouts, 0 refused commands, 0 stale commands",
+                                  timeout=10)
+        proc_info.assertWaitForShutdown(process="sim_node", timeout=30)
+
+
+@launch_testing.post_shutdown_test()
+class TestBag(unittest.TestCase):
+
+    def test_every_process_exits_cleanly(self, proc_info):
+        launch_testing.asserts.assertExitCodes(proc_info)
+
+    def test_bag_holds_every_period_once(self, bag_dir):
+        counts = bag_counts(bag_dir)
+        for topic in ("/joint_states", "/effort_controller/commands",
+                      "/controller_node/effort_command", "/controller_node/tracking_error",
+                      "/camera/features", "/clock"):
+            self.assertEqual(counts.get(topic), STEPS, topic)
+        stamps = sorted(bag_messages(bag_dir, "/controller_node/effort_command"))
+        self.assertEqual(stamps, [k * 5_000_000 for k in range(STEPS)])
+
+    def test_tracking_error_equals_vas_run_sample_by_sample(self, bag_dir, params_file, folder):
+        out = os.path.join(folder, "vas_run")
+        run_scenario(load_scenario(params_file), out, duration=DURATION, progress=False,
+                     plots=False)
+        reference = {stamp: m.features_from_msg(msg)[1] for stamp, msg in bag_messages(
+            os.path.join(out, "run.mcap"), "/controller_node/tracking_error").items()}
+        recorded = {stamp: m.features_from_msg(msg)[1] for stamp, msg in bag_messages(
+            bag_dir, "/controller_node/tracking_error").items()}
+        self.assertEqual(sorted(recorded), sorted(reference))
+        stamps = sorted(reference)
+        np.testing.assert_allclose([recorded[s] for s in stamps], [reference[s] for s in stamps],
+                                   rtol=0.0, atol=1e-6)

@@ -1,0 +1,86 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The ``main`` of the package's nodes: spin until done or Ctrl-C, then stop cleanly.
+
+The ros2/demos pattern (``rclpy.spin``; catch ``KeyboardInterrupt`` and
+``ExternalShutdownException``; destroy the node; ``try_shutdown``) fails under a
+terminal's Ctrl-C of ``ros2 launch``, seen here on Jazzy:
+
+* rclpy's signal handler shuts the context down from its own thread while the
+  main thread may be inside a callback: ``publish`` then raises ``RCLError:
+  publisher's context is invalid`` (exit status 1), or the executor's next wait
+  set raises ``failed to initialize wait set``;
+* the terminal sends SIGINT to every process of the group and ``ros2 launch``
+  forwards one more to each node: the second ``KeyboardInterrupt`` lands in the
+  ``finally`` clause, inside ``destroy_node`` (traceback, exit status -2).
+
+So rclpy installs no signal handler here (``SignalHandlerOptions.NO``); SIGINT
+and SIGTERM only set a flag, and the executor spins with a short timeout and
+looks at the flag between callbacks.  The sample in flight is finished, the
+context stays valid until the node is destroyed, a second signal changes
+nothing, and the node exits with status 0 within ``SPIN_TIMEOUT`` plus one
+callback.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from .config import ConfigError
+
+SPIN_TIMEOUT = 0.1    # s of wall time: the longest a stop request waits for the executor
+
+
+def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
+    """Create a node with ``make_node()``, spin it, return the process exit status.
+
+    Returns 2 when ``make_node`` raises one of ``config_errors`` (logged as a
+    fatal invalid configuration), 0 when the node is done (its ``finished``
+    future, if it has one, completes) or SIGINT/SIGTERM arrives.
+    """
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    executor, node = None, None
+    try:
+        try:
+            node = make_node()
+        except config_errors as exc:
+            rclpy.logging.get_logger(name).fatal(f"invalid configuration: {exc}")
+            return 2
+        finished = getattr(node, "finished", None)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and not (finished is not None and finished.done()):
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+        if stop.is_set():
+            node.get_logger().info("interrupted: stopping")
+        return 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
