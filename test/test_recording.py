@@ -36,6 +36,7 @@ from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
+import lz4.frame
 import numpy as np
 import pytest
 import yaml
@@ -48,8 +49,9 @@ from visual_adaptive_servo import messages as m
 from visual_adaptive_servo.config import load_scenario
 from visual_adaptive_servo.controller import (AdaptiveVisualTracker, EstimatorState, health,
                                               StepResult)
-from visual_adaptive_servo.recording import CONTROLLER_NS, McapRecorder, SIM_NS, TOPICS
-from visual_adaptive_servo.runner import run_scenario
+from visual_adaptive_servo.recording import (CAMERA_TOPICS, CONTROLLER_NS, McapRecorder, SIM_NS,
+                                             TOPICS)
+from visual_adaptive_servo.runner import FrameDetections, run_scenario
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -57,17 +59,23 @@ MAGIC = b"\x89MCAP0\r\n"
 class ReferenceRecorder:
     """The recorder before batching: one message object and one Writer.write per message."""
 
-    def __init__(self, path, joint_names, model):
+    def __init__(self, path, joint_names, model, camera=None):
         self.path, self.names = Path(path), list(joint_names)
         self.labels = m.parameter_labels(model)
         self.msgs = m.rosbags_messages()
+        self.camera = camera
         self.tmp = Path(tempfile.mkdtemp(dir=self.path.parent))
         self.writer = Writer(self.tmp / self.path.stem, version=9,
                              storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
+        topics = dict(TOPICS, **(CAMERA_TOPICS if camera is not None else {}))
         self.connections = {topic: self.writer.add_connection(
             topic, m.MESSAGE_TYPES[short], typestore=self.msgs.typestore)
-            for topic, short in TOPICS.items()}
+            for topic, short in topics.items()}
+
+    def record_picture(self, meas):
+        for topic, msg in m.camera_outputs(self.msgs, meas, self.camera):
+            self.write(topic, meas.t, msg)
 
     def write(self, topic, t, msg):
         conn = self.connections[topic]
@@ -155,13 +163,16 @@ def read_mcap(path):
         elif opcode == 0x06:
             start, end, size, _ = struct.unpack_from("<QQQI", body)
             (compression,), pos = strings(body, 28, 1)
-            assert compression == b""
             (length,) = struct.unpack_from("<Q", body, pos)
-            assert length == size
-            chunks[at] = {"start": start, "end": end, "length": 9 + len(body), "messages": {}}
-            inner = pos + 8
-            for inner_at, inner_op, inner_body in records(body, inner, inner + length):
-                content(inner_op, inner_body, at, inner_at - inner)
+            assert length == len(body) - pos - 8
+            stored = body[pos + 8:]
+            chunk_records = {b"": lambda data: data, b"lz4": lz4.frame.decompress}[compression](
+                stored)
+            assert len(chunk_records) == size
+            chunks[at] = {"start": start, "end": end, "length": 9 + len(body), "messages": {},
+                          "compression": compression, "sizes": (length, size)}
+            for inner_at, inner_op, inner_body in records(chunk_records, 0, size):
+                content(inner_op, inner_body, at, inner_at)
         elif opcode == 0x07:
             channel, size = struct.unpack_from("<HI", body)
             entries = np.frombuffer(body, "<u8", size // 8, 6).reshape(-1, 2)
@@ -193,6 +204,9 @@ def read_mcap(path):
         offsets = dict(struct.iter_unpack("<HQ", body[36:36 + size]))
         (index_length,) = struct.unpack_from("<Q", body, 36 + size)
         assert index_length == sum(message_indexes[at][2] for at in offsets.values())
+        (compression,), pos = strings(body, 44 + size, 1)
+        assert compression == chunk["compression"]
+        assert struct.unpack_from("<QQ", body, pos) == chunk["sizes"]
         indexed = {}
         for channel, at in offsets.items():
             assert message_indexes[at][0] == channel
@@ -236,14 +250,21 @@ def assert_same_recording(ours, reference):
             == yaml.safe_load(b.metadata["rosbag2"]["serialized_metadata"]))
 
 
-def record_both(tmp_path, steps, joint_names, model, steps_per_chunk):
-    """Record ``steps`` [(meas, res, diagnostics_due)] with both recorders; the two paths."""
+def record_both(tmp_path, steps, joint_names, model, steps_per_chunk, camera=None):
+    """Record ``steps`` [(meas, res, diagnostics_due[, picture])] with both recorders.
+
+    ``picture``: the measurement with the rendered frame (before detection), for
+    recorders made with a ``camera``.  Returns the two paths.
+    """
     ours, reference = tmp_path / "ours" / "run.mcap", tmp_path / "reference" / "run.mcap"
     ours.parent.mkdir()
     reference.parent.mkdir()
-    with McapRecorder(ours, joint_names, model, steps_per_chunk) as recorder:
-        ref = ReferenceRecorder(reference, joint_names, model)
-        for meas, res, due in steps:
+    with McapRecorder(ours, joint_names, model, steps_per_chunk, camera=camera) as recorder:
+        ref = ReferenceRecorder(reference, joint_names, model, camera=camera)
+        for meas, res, due, *picture in steps:
+            if picture:
+                recorder.record_picture(picture[0])
+                ref.record_picture(picture[0])
             recorder.record(meas, res, due)
             ref.record(meas, res, due)
         ref.close()
@@ -274,6 +295,49 @@ def closed_loop_steps(scenario, count):
 
 
 SLOW_CAMERA = ["sim_node.camera_rate=40", "sim_node.camera_latency=0.012"]
+RENDERED = ["sim_node.camera_mode=rendered", "sim_node.camera_rate=50",
+            "sim_node.camera_latency=0.01"]
+
+
+def rendered_steps(scenario, count):
+    """(meas after detection, res, diagnostics due, meas with the picture) of a rendered loop."""
+    sim = Simulator(scenario.sim)
+    ctl = AdaptiveVisualTracker(scenario.controller)
+    detections = FrameDetections(scenario.detector)
+    steps = []
+    try:
+        for k in range(count):
+            picture = sim.measure()
+            meas = detections.detect(picture) if picture.image is not None else picture
+            res = ctl.step(meas.t, meas.q, meas.qd, meas.pixels, meas.feature_stamp)
+            steps.append((meas, res, k % 50 == 0, picture))
+            sim.apply(res.tau)
+    finally:
+        sim.close()
+    return steps
+
+
+def test_rendered_recording_adds_the_pictures_before_their_period_compressed(tmp_path):
+    scenario = load_scenario(PAPER_CONFIG, RENDERED)
+    steps = rendered_steps(scenario, 60)
+    frames = sum(picture.image is not None for *_, picture in steps)
+    assert frames == 15 and all(meas.pixels is not None for meas, *_, picture in steps
+                                if picture.image is not None)
+    ours, reference = record_both(tmp_path, steps, scenario.sim.joint_names,
+                                  scenario.controller.model, steps_per_chunk=25,
+                                  camera=scenario.sim.camera)
+    assert_same_recording(ours, reference)
+    content = read_mcap(ours)
+    # a channel's body after its id: schema id, topic, ...
+    channels = {cid: strings(rest, 2, 1)[0][0].decode() for cid, rest in content.channels.items()}
+    topics = [channels[msg[0]] for msg in content.messages]
+    assert topics.count("/camera/image_raw") == topics.count("/camera/camera_info") == frames
+    # each picture right before its period's messages, CameraInfo after it, then the features
+    for i, topic in enumerate(topics):
+        if topic == "/camera/image_raw":
+            assert topics[i + 1:i + 4] == ["/camera/camera_info", "/camera/features", "/clock"]
+    # the pictures make the file 100x smaller than their pixels (LZ4 chunks)
+    assert os.path.getsize(ours) < frames * 640 * 480 * 3 / 50
 
 
 @pytest.mark.parametrize("camera", [[], SLOW_CAMERA],
@@ -454,3 +518,30 @@ def test_recorded_run_decodes_to_its_timeseries(tmp_path, scenario):
     np.testing.assert_allclose(points(f"{CONTROLLER_NS}/tracking_error"),
                                cols("x0", "x1") - cols("x_d0", "x_d1"), atol=1e-5)
     np.testing.assert_allclose(stamps(f"{CONTROLLER_NS}/desired"), t, atol=1e-9)
+
+
+def test_rendered_run_records_the_pictures_the_detector_saw(tmp_path):
+    """Oracle: the detector, run again on the recorded pictures, gives the recorded features."""
+    from visual_adaptive_servo.detection import detect
+
+    scenario = load_scenario(PAPER_CONFIG, RENDERED)
+    summary = run_scenario(scenario, str(tmp_path), duration=0.3, progress=False, plots=False)
+    assert not summary["diverged"] and summary["frames_published"] == 15
+    by_topic = {}
+    with AnyReader([tmp_path / "run.mcap"]) as reader:
+        for conn, _, raw in reader.messages():
+            by_topic.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+    images, infos = by_topic["/camera/image_raw"], by_topic["/camera/camera_info"]
+    features = by_topic["/camera/features"]
+    assert len(images) == len(infos) == len(features) == 15
+    camera = scenario.sim.camera
+    for image, info, feature in zip(images, infos, features):
+        assert (image.height, image.width, image.encoding) == (480, 640, "rgb8")
+        assert image.header.stamp == info.header.stamp == feature.header.stamp
+        np.testing.assert_allclose(info.k, [camera.fx, 0, camera.cx, 0, camera.fy, camera.cy,
+                                            0, 0, 1])
+        stamp, rgb = m.image_from_msg(image)
+        assert stamp == m.stamp_to_time(feature.header.stamp)
+        found = detect(rgb, scenario.detector)
+        recorded = [c for p in feature.polygon.points for c in (p.x, p.y)]
+        np.testing.assert_allclose(found.pixels, recorded, atol=1e-4)

@@ -27,6 +27,12 @@ them into CDR bytes for all messages at once (:class:`messages.CdrLayout`,
 probed from the messages ``sim_outputs``/``controller_outputs`` build) and
 writes the chunk whole (:class:`McapFile`, the records rosbags' Writer
 writes).
+
+In rendered mode the pictures are recorded too (``/camera/image_raw``,
+``/camera/camera_info``): 0.9 MB per 640x480 frame, so chunks holding
+pictures are LZ4-compressed (the simulated scene's large even areas compress
+about 190x at 0.2 ms per frame; lz4 comes with rosbags) and written when
+:data:`PICTURE_CHUNK_BYTES` of pictures are pending.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ import struct
 from pathlib import Path
 from types import SimpleNamespace
 
+import lz4.frame
 import numpy as np
 import yaml
 
@@ -64,6 +71,10 @@ TOPICS = {
     f"{CONTROLLER_NS}/effort_command": "JointState",
     "/diagnostics": "DiagnosticArray",
 }
+
+# rendered mode: the frame's picture, published by sim_node before the joint state
+CAMERA_TOPICS = {"/camera/image_raw": "Image", "/camera/camera_info": "CameraInfo"}
+PICTURE_CHUNK_BYTES = 64 << 20    # uncompressed picture bytes per chunk, at most about
 
 MAGIC = b"\x89MCAP0\r\n"
 # Message record: opcode, record length, channel id, sequence, log time, publish time, data
@@ -123,17 +134,20 @@ class McapFile:
         self._write(_record(0x04, body))
         return channel_id
 
-    def write_chunk(self, records, index):
+    def write_chunk(self, records, index, compress=False):
         """Write one chunk of message ``records`` (bytes) and its message indexes.
 
         ``index`` maps each channel id with messages in the chunk to
-        (log times (P,) ns, offsets (P,) of its records in ``records``).
+        (log times (P,) ns, offsets (P,) of its records in ``records``);
+        ``compress``: store the records LZ4-compressed (the offsets stay those
+        in the uncompressed records, as MCAP defines them).
         """
         start = min(int(times.min()) for times, _ in index.values())
         end = max(int(times.max()) for times, _ in index.values())
-        body = (struct.pack("<QQQI", start, end, len(records), 0) + _string("")
-                + struct.pack("<Q", len(records)))
-        chunk = _record(0x06, body + records)
+        compression, stored = ("lz4", lz4.frame.compress(records)) if compress else ("", records)
+        body = (struct.pack("<QQQI", start, end, len(records), 0) + _string(compression)
+                + struct.pack("<Q", len(stored)))
+        chunk = _record(0x06, body + stored)
         chunk_at = self._end
         pieces, offsets, at = [chunk], [], chunk_at + len(chunk)
         for channel_id, (times, where) in sorted(index.items()):
@@ -145,8 +159,8 @@ class McapFile:
         offsets = b"".join(offsets)
         self.chunk_indexes.append(
             struct.pack("<QQQQI", start, end, chunk_at, len(chunk), len(offsets)) + offsets
-            + struct.pack("<Q", at - chunk_at - len(chunk)) + _string("")
-            + struct.pack("<QQ", len(records), len(records)))
+            + struct.pack("<Q", at - chunk_at - len(chunk)) + _string(compression)
+            + struct.pack("<QQ", len(stored), len(records)))
         for channel_id, (times, _) in index.items():
             self.counts[channel_id] += len(times)
         self.start = start if self.start is None else min(self.start, start)
@@ -243,11 +257,13 @@ class McapRecorder:
     build for sentinel values (:class:`messages.CdrLayout`).  /diagnostics
     (1 Hz and on a status change) is built and serialised message by message,
     with a type store of the recorded types only
-    (:func:`messages.rosbags_messages_minimal`).  Use as a context manager;
-    the file is complete after :meth:`close` also when a run fails.
+    (:func:`messages.rosbags_messages_minimal`).  With a ``camera`` (rendered
+    mode) :meth:`record_picture` adds each frame's picture and CameraInfo
+    before its period.  Use as a context manager; the file is complete after
+    :meth:`close` also when a run fails.
     """
 
-    def __init__(self, path, joint_names, model, steps_per_chunk=1000):
+    def __init__(self, path, joint_names, model, steps_per_chunk=1000, camera=None):
         self.msgs = m.rosbags_messages_minimal()
         n, m2, m1 = len(joint_names), 2 * model.m, model.m
         # the fields of Measurement and StepResult that sim_outputs/controller_outputs read
@@ -260,11 +276,15 @@ class McapRecorder:
             ("a_z", "f8", model.p_z), ("a_d", "f8", model.p_d)])
         self._count = 0
         self._diagnostics = {}  # row -> CDR of /diagnostics
+        self._pictures = {}     # row -> [(topic, CDR)] of the frame published before it
+        self._picture_bytes = 0
+        self.camera = camera
         self.file = McapFile(path)
+        topics = dict(TOPICS, **(CAMERA_TOPICS if camera is not None else {}))
         try:
             self.channels = {topic: self.file.add_channel(topic, m.MESSAGE_TYPES[short],
                                                           self.msgs.typestore)
-                             for topic, short in TOPICS.items()}
+                             for topic, short in topics.items()}
             self._layouts = self._probe(list(joint_names), model)
         except BaseException:
             self.file.discard()
@@ -284,13 +304,30 @@ class McapRecorder:
                 msg, m.MESSAGE_TYPES["DiagnosticArray"]))
         self._count = k + 1
 
+    def record_picture(self, meas):
+        """Add the rendered frame of ``meas`` (its picture, before detection) to the next period.
+
+        Call before :meth:`record` of the same period; nothing without a picture.
+        """
+        if meas.image is None:
+            return
+        if self.camera is None:
+            raise ValueError("McapRecorder: record_picture needs the recorder made with camera=")
+        if self._count == len(self._meas) or self._picture_bytes >= PICTURE_CHUNK_BYTES:
+            self.flush()
+        serialize = self.msgs.typestore.serialize_cdr
+        pictures = [(topic, bytes(serialize(msg, m.MESSAGE_TYPES[CAMERA_TOPICS[topic]])))
+                    for topic, msg in m.camera_outputs(self.msgs, meas, self.camera)]
+        self._pictures[self._count] = pictures
+        self._picture_bytes += sum(len(cdr) for _, cdr in pictures)
+
     def flush(self):
         """Write the recorded periods as one chunk (nothing if there are none)."""
         if self._count == 0:
             return
         records, index = self._chunk(*self._stacked(self._count))
-        self.file.write_chunk(records, index)
-        self._count, self._diagnostics = 0, {}
+        self.file.write_chunk(records, index, compress=bool(self._pictures))
+        self._count, self._diagnostics, self._pictures, self._picture_bytes = 0, {}, {}, 0
 
     def close(self):
         """Write the recorded periods and finish the file.
@@ -396,29 +433,45 @@ class McapRecorder:
             at = end + layout.size
         sizes = np.array(sizes)
         data = frame.reshape(-1) if present.all() else frame[np.repeat(present, sizes, axis=1)]
-        # /diagnostics comes after the step's other messages
-        diag = {s: MESSAGE_HEAD.pack(0x05, MESSAGE_HEAD.size - 9 + len(cdr),
-                                     self.channels["/diagnostics"], 0, log_time[s],
-                                     log_time[s]) + cdr
-                for s, cdr in self._diagnostics.items()}
-        lengths = np.zeros((k, len(numbers) + 1), dtype=np.int64)
-        lengths[:, :-1] = present * sizes
-        lengths[list(diag), -1] = [len(r) for r in diag.values()]
+
+        def message(topic, s, cdr):
+            return MESSAGE_HEAD.pack(0x05, MESSAGE_HEAD.size - 9 + len(cdr), self.channels[topic],
+                                     0, log_time[s], log_time[s]) + cdr
+
+        # the frame's picture comes before the period's messages, /diagnostics after them
+        before = {s: [(topic, message(topic, s, cdr)) for topic, cdr in pictures]
+                  for s, pictures in self._pictures.items()}
+        after = {s: [("/diagnostics", message("/diagnostics", s, cdr))]
+                 for s, cdr in self._diagnostics.items()}
+        lengths = np.zeros((k, len(numbers) + 2), dtype=np.int64)
+        lengths[:, 1:-1] = present * sizes
+        for column, extra in ((0, before), (-1, after)):
+            lengths[list(extra), column] = [sum(len(r) for _, r in records)
+                                            for records in extra.values()]
         starts = (np.cumsum(lengths) - lengths.ravel()).reshape(lengths.shape)
-        ends = np.cumsum(lengths[:, :-1].sum(axis=1))
-        parts, done = [], 0
-        for s, record in sorted(diag.items()):
-            parts += [data[done:ends[s]], record]
-            done = ends[s]
+        row_ends = np.cumsum(lengths[:, 1:-1].sum(axis=1))    # in ``data``
+        parts, done, extra_at = [], 0, {}
+        for s in sorted(set(before) | set(after)):
+            row_start = row_ends[s] - lengths[s, 1:-1].sum()
+            parts.append(data[done:row_start])
+            for column, records in ((0, before.get(s, ())), (-1, after.get(s, ()))):
+                if column == -1:
+                    parts.append(data[row_start:row_ends[s]])
+                at = starts[s, column]
+                for topic, record in records:
+                    parts.append(record)
+                    extra_at.setdefault(topic, []).append((log_time[s], at))
+                    at += len(record)
+            done = row_ends[s]
         parts.append(data[done:])
         index = {}
         for j, (topic, *_) in enumerate(numbers):
             rows = present[:, j]
             if rows.any():
-                index[self.channels[topic]] = (log_time[rows], starts[rows, j])
-        if diag:
-            rows = sorted(diag)
-            index[self.channels["/diagnostics"]] = (log_time[rows], starts[rows, -1])
+                index[self.channels[topic]] = (log_time[rows], starts[rows, j + 1])
+        for topic, entries in extra_at.items():
+            times, where = np.array(entries, dtype=np.int64).T
+            index[self.channels[topic]] = (times, where)
         return b"".join(parts), index
 
 

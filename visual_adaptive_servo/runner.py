@@ -124,7 +124,9 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     counters = {"rejected": 0, "fallback": 0, "saturated": 0, "projection_active": 0,
                 "damped": 0, "sim_refused_commands": 0}
     diverged, reason, interrupted, error = False, "", False, None
-    recorder = (McapRecorder(os.path.join(out_dir, "run.mcap"), scenario.sim.joint_names, model)
+    rendered = scenario.sim.camera_mode == "rendered"
+    recorder = (McapRecorder(os.path.join(out_dir, "run.mcap"), scenario.sim.joint_names, model,
+                             camera=scenario.sim.camera if rendered else None)
                 if record else None)
     detections = FrameDetections(scenario.detector)
     bar = Progress(steps, progress)
@@ -137,6 +139,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             truth = sim.measure()
             meas = truth if faults is None else faults(k, truth)
             if meas.image is not None:
+                if recorder is not None:
+                    recorder.record_picture(meas)
                 meas = detections.detect(meas)
             # what controller_node reads from the messages: times from their nanosecond
             # stamps, pixels as float32 (so this loop and the nodes compute the same)
