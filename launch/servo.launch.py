@@ -33,7 +33,10 @@ shuts down.  ``record:=true`` runs ``ros2 bag record -s mcap`` on the topics
 subscribes, and the shutdown waits ``RECORDER_GRACE`` for it to take the last
 messages.  Not ``--use-sim-time``: with it the recorder subscribes nothing
 before /clock has moved, i.e. after the start; the bag's receive times are
-wall time, the messages' header stamps simulated time.
+wall time, the messages' header stamps simulated time.  With the rendered
+camera the pictures are recorded too (recording.CAMERA_TOPICS), zstd-compressed
+by the MCAP storage (``--storage-preset-profile zstd_fast``), as ``vas run``
+records them (LZ4 there).
 """
 
 import os
@@ -54,7 +57,7 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from visual_adaptive_servo.recording import TOPICS
+from visual_adaptive_servo.recording import CAMERA_TOPICS, TOPICS
 
 PACKAGE = "visual_adaptive_servo"
 RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
@@ -102,7 +105,11 @@ def _nodes(context):
         cmd = ["ros2", "bag", "record", "-s", "mcap"]
         if bag_dir:
             cmd += ["-o", bag_dir]
-        cmd += ["--topics"] + sorted(TOPICS)
+        topics = sorted(TOPICS)
+        if camera_mode == "rendered":
+            topics += sorted(CAMERA_TOPICS)
+            cmd += ["--storage-preset-profile", "zstd_fast"]
+        cmd += ["--topics"] + topics
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
     return nodes + actions

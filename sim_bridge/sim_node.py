@@ -225,6 +225,8 @@ class SimNode(Node):
             need.update({"/joint_states": 2, "/clock": 2, "/camera/features": 2})
         if self.rendered:
             need["/camera/image_raw"] = 1
+            if self.config["start.wait_for_recorder"]:     # the detector's and the recorder's
+                need.update({"/camera/image_raw": 2, "/camera/camera_info": 1})
         missing = [f"{topic} ({count} of {need[topic]} subscribers)"
                    for topic in sorted(need)
                    for count in [matched[topic] if topic in matched else self._subscribers(topic)]
