@@ -32,7 +32,7 @@ Usage::
 
     python benchmarks/bench_closed_loop.py [--config FILE] [--duration S] [--repeats R]
 
-Prints a markdown table and writes benchmarks/results/closed_loop.json.
+Prints a markdown table and writes benchmarks/results/closed_loop_<config name>.json.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ from visual_adaptive_servo.runner import run_scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")
-RESULTS = os.path.join(HERE, "results", "closed_loop.json")
+RESULTS = os.path.join(HERE, "results", "closed_loop_{name}.json")
 
 
 def time_runs(scenario, duration, repeats):
@@ -99,7 +99,8 @@ def main(argv=None):
     parser.add_argument("--config", default=DEFAULT_CONFIG)
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs")
-    parser.add_argument("--out", default=RESULTS, help="JSON result file")
+    parser.add_argument("--out", help="JSON result file (default: "
+                        "results/closed_loop_<config name>.json)")
     args = parser.parse_args(argv)
 
     scenario = load_scenario(args.config)
@@ -131,7 +132,8 @@ def main(argv=None):
     for name, us in parts.items():
         print(f"| {name} | {us:.1f} |")
     print(f"| sum | {sum(parts.values()):.1f} |")
-    write_result(args.out, result)
+    name = os.path.splitext(os.path.basename(args.config))[0]
+    write_result(args.out or RESULTS.format(name=name), result)
 
 
 if __name__ == "__main__":
