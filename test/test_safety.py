@@ -58,9 +58,9 @@ def test_blended_start_begins_at_the_measurement_and_ends_on_the_trajectory():
     blend = BlendedStart(traj, x0, 1.0, 2.0)
     x, xd, xdd = blend(1.0)
     np.testing.assert_allclose(x, x0)
-    # the fading offset has zero rate at both ends: x_d moves with the trajectory from the start
-    np.testing.assert_allclose(xd, traj(1.0)[1], atol=1e-12)
-    np.testing.assert_allclose(xdd, traj(1.0)[2], atol=1e-12)
+    # x_d starts at rest, as the arm does: zero velocity and acceleration
+    np.testing.assert_allclose(xd, 0.0, atol=1e-12)
+    np.testing.assert_allclose(xdd, 0.0, atol=1e-12)
     for t in (3.0, 4.5):
         for a, b in zip(blend(t), traj(t)):
             np.testing.assert_allclose(a, b)
