@@ -41,6 +41,8 @@ setup(
         "PyYAML>=6.0",
         "matplotlib>=3.6",
         "rosbags>=0.10.4",
+        # LZ4 chunks of the rendered pictures in run.mcap; a dependency of rosbags anyway
+        "lz4>=3.1",
         # Pinocchio (rigid-body dynamics of URDF arms) and scipy (its base-parameter QR);
         # with numpy 1.26 pip can only resolve pin 2.7 (pin 3+ wheels need numpy >= 2.2)
         "pin>=2.7",
