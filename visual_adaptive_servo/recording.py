@@ -266,14 +266,15 @@ class McapRecorder:
     def __init__(self, path, joint_names, model, steps_per_chunk=1000, camera=None):
         self.msgs = m.rosbags_messages_minimal()
         n, m2, m1 = len(joint_names), 2 * model.m, model.m
-        # the fields of Measurement and StepResult that sim_outputs/controller_outputs read
+        # the fields of Measurement and StepResult that sim_outputs/controller_outputs read;
+        # shapes as tuples: numpy 1.x reads an integer 1 as a scalar field (m = 1 depths)
         self._meas = np.empty(steps_per_chunk, dtype=[
-            ("t", "f8"), ("q", "f8", n), ("qd", "f8", n), ("tau_applied", "f8", n),
-            ("feature_stamp", "f8"), ("pixels", "f8", m2), ("true_depth", "f8", m1)])
+            ("t", "f8"), ("q", "f8", (n,)), ("qd", "f8", (n,)), ("tau_applied", "f8", (n,)),
+            ("feature_stamp", "f8"), ("pixels", "f8", (m2,)), ("true_depth", "f8", (m1,))])
         self._res = np.empty(steps_per_chunk, dtype=[
-            ("t", "f8"), ("tau", "f8", n), ("x_d", "f8", m2), ("x_obs", "f8", m2),
-            ("error", "f8", m2), ("z_hat", "f8", m1), ("a_z_perp", "f8", model.p_perp),
-            ("a_z", "f8", model.p_z), ("a_d", "f8", model.p_d)])
+            ("t", "f8"), ("tau", "f8", (n,)), ("x_d", "f8", (m2,)), ("x_obs", "f8", (m2,)),
+            ("error", "f8", (m2,)), ("z_hat", "f8", (m1,)), ("a_z_perp", "f8", (model.p_perp,)),
+            ("a_z", "f8", (model.p_z,)), ("a_d", "f8", (model.p_d,))])
         self._count = 0
         self._diagnostics = {}  # row -> CDR of /diagnostics
         self._pictures = {}     # row -> [(topic, CDR)] of the frame published before it
