@@ -75,7 +75,7 @@ from .config import (
 )
 from .controller import AdaptiveVisualTracker, frame_values, health
 from .ros_main import run_node
-from .ros_params import declare_schema, from_ros
+from .ros_params import declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
@@ -196,16 +196,9 @@ class ControllerNode(Node):
 
     # -- parameters --------------------------------------------------------------
     def _on_set_parameters(self, parameters):
-        changes = {}
-        for param in parameters:
-            spec = self.specs.get(param.name)
-            if spec is None:          # rclpy's own parameters (use_sim_time, ...)
-                continue
-            if not spec.runtime:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f"{param.name} cannot change while running (restart the node)")
-            changes[param.name] = from_ros(spec, param.value)
+        changes, refused = runtime_changes(self.specs, parameters)
+        if refused:
+            return SetParametersResult(successful=False, reason=refused)
         if changes:
             try:
                 self.tracker.update_gains(**changes)

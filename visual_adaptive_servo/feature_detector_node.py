@@ -73,7 +73,7 @@ from .config import DETECTOR_PARAMS, DETECTOR_SECTION, ConfigError
 from .detection import DetectorConfig, detect, image_points
 from .overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
 from .ros_main import run_node
-from .ros_params import declare_schema, from_ros
+from .ros_params import declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of wall time between two /diagnostics when the level stays
@@ -167,16 +167,9 @@ class FeatureDetectorNode(Node):
 
     # -- parameters --------------------------------------------------------------
     def _on_set_parameters(self, parameters):
-        changes = {}
-        for param in parameters:
-            spec = self.specs.get(param.name)
-            if spec is None:          # rclpy's own parameters (use_sim_time, ...)
-                continue
-            if not spec.runtime:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f"{param.name} cannot change while running (restart the node)")
-            changes[param.name] = from_ros(spec, param.value)
+        changes, refused = runtime_changes(self.specs, parameters)
+        if refused:
+            return SetParametersResult(successful=False, reason=refused)
         if not changes:
             return SetParametersResult(successful=True)
         params = dict(self.params, **changes)

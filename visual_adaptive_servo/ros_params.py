@@ -92,6 +92,23 @@ def from_ros(spec, value):
     return value
 
 
+def runtime_changes(specs, parameters):
+    """The schema values of a parameter-set request: ``(changes, None)``, or ``(None, reason)``.
+
+    ``specs`` maps names to ParamSpecs; parameters it does not know (rclpy's own,
+    ``use_sim_time``, ...) are left out.  A read-only one refuses the whole request.
+    """
+    changes = {}
+    for param in parameters:
+        spec = specs.get(param.name)
+        if spec is None:
+            continue
+        if not spec.runtime:
+            return None, f"{param.name} cannot change while running (restart the node)"
+        changes[param.name] = from_ros(spec, param.value)
+    return changes, None
+
+
 def declare_schema(node, specs, section, build_structure=None):
     """Declare ``specs`` on ``node``; return the flat {name: value} it ends up with.
 
