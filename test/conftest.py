@@ -24,6 +24,7 @@ known, for the feature detector's tests.
 """
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -144,3 +145,19 @@ def bag_counts(path):
         for connection in reader.connections:
             counts[connection.topic] = counts.get(connection.topic, 0) + connection.msgcount
     return counts
+
+
+def spin_until(context, nodes, until, timeout):
+    """Spin ``nodes`` in one executor of ``context`` until ``until()`` or ``timeout`` [s].
+
+    For the rclpy tests (they import rclpy first, skipping without ROS).
+    """
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    deadline = time.monotonic() + timeout
+    while not until() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    executor.shutdown()

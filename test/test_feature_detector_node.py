@@ -21,17 +21,15 @@ of conftest.draw_discs, and the stamp of the image that was published.
 """
 
 import os
-import time
 
 import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)")
 
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from conftest import draw_discs  # noqa: E402
+from conftest import draw_discs, spin_until  # noqa: E402
 from visual_adaptive_servo import messages as m  # noqa: E402
 from visual_adaptive_servo.config import ConfigError  # noqa: E402
 from visual_adaptive_servo.feature_detector_node import FeatureDetectorNode, main  # noqa: E402
@@ -53,16 +51,6 @@ def context():
     rclpy.init(context=ctx, domain_id=DOMAIN_ID)
     yield ctx
     rclpy.try_shutdown(context=ctx)
-
-
-def _spin(context, nodes, until, timeout):
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    deadline = time.monotonic() + timeout
-    while not until() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    executor.shutdown()
 
 
 class Probe:
@@ -100,7 +88,7 @@ def _connected(context, node, probe, overlay=False):
                 and node.features_pub.get_subscription_count() > 0
                 and node.diagnostics_pub.get_subscription_count() > 0
                 and (not overlay or node.overlay_pub.get_subscription_count() > 0))
-    _spin(context, [node, probe.node], ready, 10.0)
+    spin_until(context, [node, probe.node], ready, 10.0)
     assert ready(), "the probe and the detector did not discover each other in 10 s"
 
 
@@ -111,9 +99,9 @@ def test_features_of_an_image_carry_its_stamp_and_frame(context):
         _connected(context, node, probe)
         image, truth = draw_discs(H, W, [(40.3, 50.7, 6.0, RED), (110.6, 70.2, 6.0, GREEN)])
         probe.publish_image(image)
-        _spin(context, [node, probe.node], lambda: probe.features and probe.statuses, 10.0)
+        spin_until(context, [node, probe.node], lambda: probe.features and probe.statuses, 10.0)
         assert len(probe.features) == 1
-        _spin(context, [node, probe.node], lambda: probe.processed, 10.0)
+        spin_until(context, [node, probe.node], lambda: probe.processed, 10.0)
         assert [(p.stamp.sec, p.stamp.nanosec) for p in probe.processed] == [STAMP]
         msg = probe.features[0]
         assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == STAMP
@@ -137,8 +125,8 @@ def test_frame_with_a_missing_marker_gives_no_features_and_a_warning(context):
         _connected(context, node, probe)
         image, _ = draw_discs(H, W, [(40.3, 50.7, 6.0, RED)])
         probe.publish_image(image)
-        _spin(context, [node, probe.node], lambda: probe.statuses, 10.0)
-        _spin(context, [node, probe.node], lambda: False, 0.3)   # nothing else may come
+        spin_until(context, [node, probe.node], lambda: probe.statuses, 10.0)
+        spin_until(context, [node, probe.node], lambda: False, 0.3)   # nothing else may come
         assert probe.features == []
         # lockstep: the simulator hears at once that this frame has no features
         assert [(p.stamp.sec, p.stamp.nanosec, p.frame_id) for p in probe.processed] == \
@@ -162,7 +150,7 @@ def test_unsupported_encoding_is_reported_not_fatal(context):
         msg = m.image_to_msg(probe.msgs, 0.5, np.zeros((4, 4, 3), np.uint8))
         msg.encoding = "mono8"
         probe.camera.publish(msg)
-        _spin(context, [node, probe.node], lambda: probe.statuses, 10.0)
+        spin_until(context, [node, probe.node], lambda: probe.statuses, 10.0)
         assert probe.features == []
         assert probe.statuses[-1].level in (1, b"\x01")
         assert "encoding 'mono8' is not supported" in probe.statuses[-1].message
@@ -177,13 +165,13 @@ def test_overlay_shows_the_detected_and_the_desired_features(context):
     probe.listen_to_overlay()
     try:
         _connected(context, node, probe, overlay=True)
-        _spin(context, [node, probe.node],
-              lambda: probe.desired.get_subscription_count() > 0, 10.0)
+        spin_until(context, [node, probe.node],
+                   lambda: probe.desired.get_subscription_count() > 0, 10.0)
         probe.desired.publish(m.features_to_msg(probe.msgs, 0.0, [80.5, 20.5, 30.5, 100.5]))
-        _spin(context, [node, probe.node], lambda: node.overlay["desired"] is not None, 10.0)
+        spin_until(context, [node, probe.node], lambda: node.overlay["desired"] is not None, 10.0)
         image, truth = draw_discs(H, W, [(40.3, 50.7, 6.0, RED), (110.6, 70.2, 6.0, GREEN)])
         probe.publish_image(image)
-        _spin(context, [node, probe.node], lambda: probe.overlays, 10.0)
+        spin_until(context, [node, probe.node], lambda: probe.overlays, 10.0)
         overlay = probe.overlays[0]
         assert (overlay.header.stamp.sec, overlay.header.stamp.nanosec) == STAMP
         rgb = m.image_from_msg(overlay)[1]

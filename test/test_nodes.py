@@ -24,17 +24,15 @@ integer nanoseconds), so the tracking error through ROS must equal the one
 """
 
 import os
-import time
 
 import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)")
 
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from conftest import bag_messages  # noqa: E402
+from conftest import bag_messages, spin_until  # noqa: E402
 from sim_bridge.sim_node import SimNode  # noqa: E402
 from visual_adaptive_servo import messages as m  # noqa: E402
 from visual_adaptive_servo.config import (  # noqa: E402
@@ -110,16 +108,6 @@ class Probe:
         return {kv.key: kv.value for kv in status.values}
 
 
-def _spin(context, nodes, until, timeout):
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    deadline = time.monotonic() + timeout
-    while not until() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    executor.shutdown()
-
-
 def _reference_errors(tmp_path, changes, duration):
     """{stamp [ns]: x - x_d} that ``vas run`` records for the same parameters."""
     scenario = load_scenario(CONFIG, [f"{key.replace('__', '.').replace('_DOT_', '.')}={value}"
@@ -139,10 +127,10 @@ def test_lockstep_loop_equals_the_in_process_runner(context, tmp_path, camera):
     sim, ctl = _make_nodes(context, _sections(**changes))
     probe = Probe(context)
     try:
-        _spin(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=120.0)
+        spin_until(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=120.0)
         assert sim.finished.done(), "the lockstep loop did not reach its duration in 120 s"
         # let the last messages arrive
-        _spin(context, [probe.node], lambda: False, timeout=0.3)
+        spin_until(context, [probe.node], lambda: False, timeout=0.3)
         steps = round(duration / 0.005)
         assert sim.counters == {"steps": steps, "command_timeouts": 0, "refused_commands": 0,
                                 "stale_commands": 0, "frame_delivery_timeouts": 0,
@@ -224,12 +212,13 @@ def test_unconvertible_joint_state_is_a_rejected_sample_not_a_crash(context):
     pub_js = probe.node.create_publisher(msgs.JointState, "/joint_states", 10)
     pub_x = probe.node.create_publisher(msgs.PolygonStamped, "/camera/features", 10)
     try:
-        _spin(context, [ctl, probe.node],
-              lambda: pub_js.get_subscription_count() and pub_x.get_subscription_count(), 10.0)
+        spin_until(context, [ctl, probe.node],
+                   lambda: pub_js.get_subscription_count() and pub_x.get_subscription_count(),
+                   10.0)
         pub_js.publish(m.joint_state_to_msg(msgs, 0.5, ["a", "b", "c"], [0.0] * 3, [0.0] * 3,
                                             [0.0] * 3))
         pub_x.publish(m.features_to_msg(msgs, 0.5, [65.0, 65.0]))
-        _spin(context, [ctl, probe.node], lambda: probe.commands and probe.diagnostics, 10.0)
+        spin_until(context, [ctl, probe.node], lambda: probe.commands and probe.diagnostics, 10.0)
         assert ctl.samples == 1
         np.testing.assert_array_equal(probe.commands[0], [0.0, 0.0, 0.0])
         status = probe.diagnostics[0]
@@ -244,7 +233,7 @@ def test_realtime_mode_runs_on_the_wall_clock(context):
                          controller_node__timing_mode="realtime")
     sim, ctl = _make_nodes(context, sections)
     try:
-        _spin(context, [sim, ctl], lambda: sim.finished.done(), timeout=30.0)
+        spin_until(context, [sim, ctl], lambda: sim.finished.done(), timeout=30.0)
         assert sim.finished.done()
         assert sim.counters["steps"] == 100
         assert ctl.samples > 50    # best effort: most samples arrive and are answered
