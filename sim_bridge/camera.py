@@ -43,16 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from visual_adaptive_servo.models.urdf_chain import rpy_matrix
+
 CAMERA_KEYS = ("position", "look_at", "up", "rpy", "focal_length", "pixel_scale",
                "principal_point", "image_size", "pixel_origin", "pixel_axes")
-
-
-def _rpy_matrix(rpy):
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
 
 
 @dataclass(frozen=True)
@@ -162,7 +156,7 @@ class PinholeCamera:
     def from_rpy(cls, position, rpy, fx, fy, cx, cy, width, height,
                  pixel_origin=(0.0, 0.0), pixel_axes=(1.0, 1.0)):
         """Camera whose frame (X right, Y down, Z forward) has URDF roll-pitch-yaw ``rpy``."""
-        return cls(_rpy_matrix(rpy).T, np.asarray(position, dtype=float), fx, fy, cx, cy,
+        return cls(rpy_matrix(rpy).T, np.asarray(position, dtype=float), fx, fy, cx, cy,
                    width, height, tuple(pixel_origin), tuple(pixel_axes))
 
     @classmethod
