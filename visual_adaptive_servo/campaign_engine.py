@@ -37,6 +37,7 @@ once per campaign, not once per worker or per replacement of a dead one.
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import logging
 import math
@@ -95,8 +96,9 @@ def execute_run(run, keep_dir=None):
 
     scenario = load_scenario(run.base, run.overrides)
     factory = controller_factory(run.controller)
-    with tempfile.TemporaryDirectory(prefix="vas-campaign-") as scratch:
-        out = scratch if keep_dir is None else os.path.join(keep_dir, f"{run.index:05d}")
+    folder = (tempfile.TemporaryDirectory(prefix="vas-campaign-") if keep_dir is None
+              else contextlib.nullcontext(os.path.join(keep_dir, f"{run.index:05d}")))
+    with folder as out:
         summary = run_scenario(scenario, out, duration=run.duration, progress=False,
                                record=False, plots=False, controller_factory=factory)
     if summary.get("error"):

@@ -180,7 +180,7 @@ class BlendedStart:
     duration: float
 
     def __post_init__(self):
-        object.__setattr__(self, "_x_start", np.asarray(self.x_start, dtype=float))
+        object.__setattr__(self, "x_start", np.asarray(self.x_start, dtype=float))
 
     @classmethod
     def from_measurement(cls, trajectory, x, t, duration, tolerance):
@@ -205,6 +205,6 @@ class BlendedStart:
             return x, xd, xdd
         sigma, sd, sdd = quintic_blend(tau)
         sd, sdd = sd / self.duration, sdd / self.duration**2
-        gap = x - self._x_start                     # trajectory minus the start point
-        return (self._x_start + sigma * gap, sigma * xd + sd * gap,
+        gap = x - self.x_start                      # trajectory minus the start point
+        return (self.x_start + sigma * gap, sigma * xd + sd * gap,
                 sigma * xdd + 2.0 * sd * xd + sdd * gap)
