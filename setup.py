@@ -16,14 +16,14 @@
 
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 package_name = "visual_adaptive_servo"
 
 setup(
     name=package_name,
     version="0.1.0",
-    packages=[package_name, package_name + ".models", "sim_bridge"],
+    packages=find_packages(include=[package_name, package_name + ".*", "sim_bridge"]),
     package_data={"sim_bridge": ["urdf/*.urdf"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
@@ -52,7 +52,8 @@ setup(
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
     # ray: `vas campaign --ray` (imported only then)
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
-                             "flake8-comprehensions", "flake8-quotes", "flake8-import-order"],
+                             "flake8-comprehensions", "flake8-quotes", "flake8-import-order",
+                             "import-linter>=2.10"],
                     "ray": ["ray>=2.9"]},
     zip_safe=True,
     maintainer="visual_adaptive_servo maintainers",
@@ -64,9 +65,9 @@ setup(
     entry_points={
         "console_scripts": [
             "vas = visual_adaptive_servo.cli:main",
-            "controller_node = visual_adaptive_servo.controller_node:main",
-            "sim_node = sim_bridge.sim_node:main",
-            "feature_detector = visual_adaptive_servo.feature_detector_node:main",
+            "controller_node = visual_adaptive_servo.ros.controller_node:main",
+            "sim_node = visual_adaptive_servo.ros.sim_node:main",
+            "feature_detector = visual_adaptive_servo.ros.feature_detector_node:main",
         ],
     },
 )

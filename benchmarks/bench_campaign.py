@@ -14,7 +14,7 @@
 
 """Campaign throughput: the same 8-run campaign with 1 and with 2 worker processes.
 
-What it measures: :func:`visual_adaptive_servo.campaign.run_campaign` on eight
+What it measures: :func:`visual_adaptive_servo.campaigns.campaign.run_campaign` on eight
 runs of the reference scenario (config/paper_3dof.yaml, 2 s blend, the feature
 started 0 to 35 px off the trajectory start, ``--duration`` simulated seconds
 each, 30 by default), into a fresh folder each time.  Two figures per worker
@@ -63,8 +63,8 @@ import time
 
 from benchlib import environment, write_result
 
-from visual_adaptive_servo.campaign import run_campaign
-from visual_adaptive_servo.campaign_engine import execute_run
+from visual_adaptive_servo.campaigns.campaign import run_campaign
+from visual_adaptive_servo.campaigns.engine import execute_run
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results", "campaign.json")
@@ -107,8 +107,8 @@ def time_campaign(spec, folder, workers):
 
 BARE = """\
 import sys
-from visual_adaptive_servo.campaign_engine import execute_run
-from visual_adaptive_servo.campaign_spec import load_spec
+from visual_adaptive_servo.campaigns.engine import execute_run
+from visual_adaptive_servo.campaigns.spec import load_spec
 runs = load_spec(sys.argv[1]).runs()
 for run in runs[int(sys.argv[2])::int(sys.argv[3])]:
     execute_run(run)

@@ -47,8 +47,8 @@ import numpy as np
 from benchlib import environment, write_result
 
 from sim_bridge.simulator import Simulator
-from visual_adaptive_servo.config import load_scenario
-from visual_adaptive_servo.controller import AdaptiveVisualTracker
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
 from visual_adaptive_servo.runner import run_scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))

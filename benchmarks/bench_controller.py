@@ -50,8 +50,8 @@ import numpy as np
 from benchlib import environment, write_result
 
 from sim_bridge.simulator import Simulator
-from visual_adaptive_servo.config import load_scenario
-from visual_adaptive_servo.controller import AdaptiveVisualTracker, control_law
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker, control_law
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")

@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 from benchlib import environment, write_result
 
-from visual_adaptive_servo.detection import (
+from visual_adaptive_servo.vision.detection import (
     BACKGROUND_GAP,
     CROP_MARGIN,
     EDGE_MARGIN,

@@ -48,8 +48,8 @@ from collections import Counter
 import numpy as np
 from benchlib import environment, write_result
 
-from visual_adaptive_servo import messages, recording
-from visual_adaptive_servo.config import load_scenario
+from visual_adaptive_servo.recording import messages, recorder as recording
+from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.runner import run_scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))

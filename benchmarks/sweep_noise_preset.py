@@ -35,8 +35,8 @@ import tempfile
 
 import yaml
 
-from visual_adaptive_servo.campaign import CSV_NAME, read_rows, run_campaign
-from visual_adaptive_servo.campaign_spec import derived_spec, load_spec
+from visual_adaptive_servo.campaigns.campaign import CSV_NAME, read_rows, run_campaign
+from visual_adaptive_servo.campaigns.spec import derived_spec, load_spec
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPEC = os.path.join(ROOT, "config", "campaigns", "noise_preset_sweep.yaml")

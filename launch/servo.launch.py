@@ -28,7 +28,7 @@ controller_node uses sim time.  ``camera_mode:=rendered`` (default: the file's
 feature_detector, configured by the file's ``feature_detector`` section.
 When any node exits (sim_node after ``duration`` of simulated time) the launch
 shuts down.  ``record:=true`` runs ``ros2 bag record -s mcap`` on the topics
-``vas run`` records (visual_adaptive_servo.recording.TOPICS) and sets
+``vas run`` records (visual_adaptive_servo.recording.recorder.TOPICS) and sets
 ``sim_node.start.wait_for_recorder``: the simulation starts once the recorder
 subscribes, and the shutdown waits ``RECORDER_GRACE`` for it to take the last
 messages.  Not ``--use-sim-time``: with it the recorder subscribes nothing
@@ -57,7 +57,7 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from visual_adaptive_servo.recording import CAMERA_TOPICS, TOPICS
+from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 
 PACKAGE = "visual_adaptive_servo"
 RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown

@@ -12,4 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""sim_bridge: the PyBullet arm and pinhole camera (ROS-free core) and its ROS 2 node."""
+"""sim_bridge: the PyBullet arm, pinhole camera and renderer (ROS-free).
+
+Its ROS 2 node is :mod:`visual_adaptive_servo.ros.sim_node`.
+"""

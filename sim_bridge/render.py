@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import pybullet
 
-from visual_adaptive_servo.overlay import draw_points
+from visual_adaptive_servo.vision.overlay import draw_points
 
 NEAR = 0.05   # m, clipping planes of the rendered frustum
 FAR = 100.0   # m

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from visual_adaptive_servo.config import load_scenario
-from visual_adaptive_servo.controller import EstimatorState, Gains, control_law
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import EstimatorState, Gains, control_law
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAPER_CONFIG = os.path.join(ROOT, "config", "paper_3dof.yaml")
@@ -96,7 +96,7 @@ def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
 
     ``discs``: (col, row, radius, (r, g, b)) per disc, centre and radius in
     continuous image coordinates (the top-left corner of the picture is (0, 0),
-    see :mod:`visual_adaptive_servo.detection`).  Each pixel is sampled on a
+    see :mod:`visual_adaptive_servo.vision.detection`).  Each pixel is sampled on a
     ``supersample`` x ``supersample`` grid; its colour is the covered fraction's
     mix of disc and what lies below, rounded to 8 bits.  The true centroid of a
     disc is the mean of its covered sample points inside the picture (m, 2):
@@ -125,7 +125,7 @@ def bag_messages(path, topic):
     """{header stamp [ns]: message} of ``topic`` in a rosbag2 (folder or .mcap file)."""
     from rosbags.highlevel import AnyReader
 
-    from visual_adaptive_servo.messages import stamp_to_ns
+    from visual_adaptive_servo.recording.messages import stamp_to_ns
 
     found = {}
     with AnyReader([Path(path)]) as reader:

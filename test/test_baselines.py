@@ -28,7 +28,11 @@ import os
 import numpy as np
 import pytest
 
-from visual_adaptive_servo.baselines import CalibratedIBVS, VelocityAdaptiveTracker, ibvs_law
+from visual_adaptive_servo.control.baselines import (
+    CalibratedIBVS,
+    VelocityAdaptiveTracker,
+    ibvs_law,
+)
 from visual_adaptive_servo.runner import run_scenario
 
 Q0 = np.array([1.0807, 0.5756, -0.5000])
@@ -96,7 +100,7 @@ def test_velocity_baseline_runs_the_clean_reference_scenario(scenario, tmp_path)
 
 
 def test_compare_figures_on_a_known_signal():
-    from visual_adaptive_servo.compare import run_figures
+    from visual_adaptive_servo.recording.summary import run_figures
 
     period = 0.01
     t = np.arange(0.0, 10.0, period)
@@ -123,7 +127,11 @@ def test_vas_compare_is_registered():
 
 
 def test_controller_names_are_the_compared_controllers():
-    from visual_adaptive_servo.compare import CONTROLLER_NAMES, controller_factory, controllers
+    from visual_adaptive_servo.control.registry import (
+        CONTROLLER_NAMES,
+        controller_factory,
+        controllers,
+    )
 
     assert CONTROLLER_NAMES == tuple(name for name, _, _ in controllers())
 

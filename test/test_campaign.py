@@ -35,14 +35,21 @@ import textwrap
 import numpy as np
 import pytest
 
-from visual_adaptive_servo.campaign import CSV_NAME, exclusive, read_rows, run_campaign
-from visual_adaptive_servo.campaign_engine import (CampaignError, execute_run, FIGURES,
-                                                   RAY_MISSING, RayCluster)
-from visual_adaptive_servo.campaign_report import wilson_interval
-from visual_adaptive_servo.campaign_spec import load_spec, SpecError, yaml_text
-from visual_adaptive_servo.compare import CONTROLLER_NAMES
-from visual_adaptive_servo.config import apply_overrides, load_scenario, SIM_PARAMS
-from visual_adaptive_servo.trajectory import SinusoidTrajectory
+from visual_adaptive_servo.campaigns.campaign import CSV_NAME, exclusive, read_rows, run_campaign
+from visual_adaptive_servo.campaigns.engine import (
+    CampaignError,
+    execute_run,
+    FIGURES,
+    RAY_MISSING,
+    RayCluster,
+)
+from visual_adaptive_servo.campaigns.report import wilson_interval
+from visual_adaptive_servo.campaigns.spec import load_spec, SpecError, yaml_text
+from visual_adaptive_servo.control.registry import CONTROLLER_NAMES
+from visual_adaptive_servo.config.files import apply_overrides
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.config.sim import SIM_PARAMS
+from visual_adaptive_servo.control.trajectory import SinusoidTrajectory
 from sim_bridge.simulator import Simulator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

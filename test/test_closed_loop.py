@@ -23,7 +23,7 @@ from rosbags.highlevel import AnyReader
 
 from conftest import PAPER_CONFIG
 from visual_adaptive_servo import cli
-from visual_adaptive_servo.recording import TOPICS
+from visual_adaptive_servo.recording.recorder import TOPICS
 from visual_adaptive_servo.runner import run_scenario
 
 SUMMARY_KEYS = {"diverged", "final_rms_error_px", "max_error_px", "max_abs_torque",

@@ -19,10 +19,12 @@ import pytest
 import yaml
 
 from conftest import PAPER_CONFIG
-from visual_adaptive_servo.config import (
-    CONTROLLER_PARAMS, SIM_PARAMS, ConfigError, ControllerConfig, SimConfig, load_scenario,
-    read_param_file)
-from visual_adaptive_servo.controller import AdaptiveVisualTracker
+from visual_adaptive_servo.config.controller import CONTROLLER_PARAMS, ControllerConfig
+from visual_adaptive_servo.config.files import read_param_file
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.config.sim import SIM_PARAMS, SimConfig
+from visual_adaptive_servo.schema import ConfigError
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
 
 
 def test_reference_file_holds_every_number_of_the_paper(scenario):
@@ -121,7 +123,7 @@ def test_configs_are_immutable(scenario):
 
 
 def test_package_paths_resolve_without_a_sourced_ros(monkeypatch):
-    from visual_adaptive_servo.resources import resolve_path
+    from visual_adaptive_servo.models.resources import resolve_path
 
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
     path = resolve_path("package://visual_adaptive_servo/urdf/paper_rrr.urdf")

@@ -24,9 +24,10 @@ import numpy as np
 import pytest
 
 from conftest import paper_gains, simulate_continuous, unpack
-from visual_adaptive_servo.config import ConfigError, ControllerConfig
-from visual_adaptive_servo.controller import EstimatorState, Gains
-from visual_adaptive_servo.trajectory import SinusoidTrajectory
+from visual_adaptive_servo.config.controller import ControllerConfig
+from visual_adaptive_servo.schema import ConfigError
+from visual_adaptive_servo.control.controller import EstimatorState, Gains
+from visual_adaptive_servo.control.trajectory import SinusoidTrajectory
 
 Q0 = np.array([1.0807, 0.5756, -0.5000])
 

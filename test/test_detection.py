@@ -37,8 +37,10 @@ from conftest import ROOT, draw_discs
 from sim_bridge import render
 from sim_bridge.camera import PinholeCamera
 from sim_bridge.plant import URDF_DIR, ArmPlant
-from visual_adaptive_servo.config import DETECTOR_PARAMS, ConfigError, flatten
-from visual_adaptive_servo.detection import (
+from visual_adaptive_servo.config.detector import DETECTOR_PARAMS, detector_config
+from visual_adaptive_servo.config.files import flatten
+from visual_adaptive_servo.schema import ConfigError
+from visual_adaptive_servo.vision.detection import (
     DetectorConfig,
     controller_pixels,
     detect,
@@ -354,11 +356,11 @@ def test_shipped_parameter_file_is_valid():
     with open(os.path.join(ROOT, "config", "feature_detector.yaml"), encoding="utf-8") as f:
         params = flatten(yaml.safe_load(f)["feature_detector"]["ros__parameters"])
     assert set(params) == {spec.name for spec in DETECTOR_PARAMS}
-    assert DetectorConfig.from_params(params).m == 1
+    assert detector_config(params).m == 1
 
 
 def test_defaults_are_one_red_marker_in_the_paper_convention_for_640x480():
-    config = DetectorConfig.from_params({})
+    config = detector_config({})
     assert config.m == 1
     np.testing.assert_array_equal(config.pixel_origin, [320.0, 240.0])
     np.testing.assert_array_equal(config.pixel_axes, [-1.0, -1.0])
@@ -377,4 +379,4 @@ def test_defaults_are_one_red_marker_in_the_paper_convention_for_640x480():
 ])
 def test_parameter_set_is_validated_whole(params, message):
     with pytest.raises(ConfigError, match=message):
-        DetectorConfig.from_params(params)
+        detector_config(params)

@@ -30,10 +30,10 @@ rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)
 from rclpy.parameter import Parameter  # noqa: E402
 
 from conftest import draw_discs, spin_until  # noqa: E402
-from visual_adaptive_servo import messages as m  # noqa: E402
-from visual_adaptive_servo.config import ConfigError  # noqa: E402
-from visual_adaptive_servo.feature_detector_node import FeatureDetectorNode, main  # noqa: E402
-from visual_adaptive_servo.overlay import COLOR_DESIRED, COLOR_MEASURED  # noqa: E402
+from visual_adaptive_servo.recording import messages as m  # noqa: E402
+from visual_adaptive_servo.schema import ConfigError  # noqa: E402
+from visual_adaptive_servo.ros.feature_detector_node import FeatureDetectorNode, main  # noqa: E402
+from visual_adaptive_servo.vision.overlay import COLOR_DESIRED, COLOR_MEASURED  # noqa: E402
 
 DOMAIN_ID = 50 + os.getpid() % 50
 RED, GREEN = (230, 30, 30), (30, 200, 30)

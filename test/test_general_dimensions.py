@@ -23,7 +23,7 @@ q_ddot_r of eq (19) must be the time derivative of q_dot_r of eq (18).
 import numpy as np
 import pytest
 
-from visual_adaptive_servo.controller import EstimatorState, Gains, control_law
+from visual_adaptive_servo.control.controller import EstimatorState, Gains, control_law
 from visual_adaptive_servo.models import RobotCameraModel
 
 

@@ -25,8 +25,12 @@ import numpy as np
 import pytest
 
 from conftest import paper_gains
-from visual_adaptive_servo.controller import (EstimatorState, Projection, _damped_gram_inverse,
-                                              control_law)
+from visual_adaptive_servo.control.controller import (
+    EstimatorState,
+    Projection,
+    _damped_gram_inverse,
+    control_law,
+)
 from visual_adaptive_servo.models import PaperRRRCamera
 
 

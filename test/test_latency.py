@@ -25,9 +25,10 @@ import numpy as np
 import pytest
 
 from conftest import PAPER_CONFIG
-from visual_adaptive_servo.config import ControllerConfig, load_scenario
-from visual_adaptive_servo.controller import AdaptiveVisualTracker, EstimatorState
-from visual_adaptive_servo.prediction import FramePredictor
+from visual_adaptive_servo.config.controller import ControllerConfig
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker, EstimatorState
+from visual_adaptive_servo.control.prediction import FramePredictor
 from visual_adaptive_servo.runner import run_scenario
 
 Q0 = np.array([1.0807, 0.5756, -0.5000])
@@ -47,7 +48,7 @@ def model():
 
 def true_rate(model, q, qd):
     """(J_perp q_dot, Z_dot, Z) per image coordinate with the true parameters."""
-    from visual_adaptive_servo.controller import estimated_kinematics
+    from visual_adaptive_servo.control.controller import estimated_kinematics
 
     truth = EstimatorState(np.zeros(2), model.a_z_perp, model.a_z, model.a_d)
     _, _, _, Zh, Zh_rate, J_perp, _ = estimated_kinematics(model.kinematic_tensors(q, qd), qd,

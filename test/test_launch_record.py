@@ -46,8 +46,8 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource
 
 from conftest import bag_counts, bag_messages
 from launch import LaunchDescription
-from visual_adaptive_servo import messages as m
-from visual_adaptive_servo.config import load_scenario
+from visual_adaptive_servo.recording import messages as m
+from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.runner import run_scenario
 
 PACKAGE = "visual_adaptive_servo"

@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 
 from sim_bridge.camera import PinholeCamera
-from visual_adaptive_servo import messages as m
+from visual_adaptive_servo.recording import messages as m
 from visual_adaptive_servo.models import make_model
-from visual_adaptive_servo.recording import TOPICS
+from visual_adaptive_servo.recording.recorder import TOPICS
 
 HAVE_RCLPY = importlib.util.find_spec("rclpy") is not None
 NAMES = ["joint1", "joint2", "joint3"]

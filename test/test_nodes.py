@@ -33,19 +33,15 @@ rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)
 from rclpy.parameter import Parameter  # noqa: E402
 
 from conftest import bag_messages, spin_until  # noqa: E402
-from sim_bridge.sim_node import SimNode  # noqa: E402
-from visual_adaptive_servo import messages as m  # noqa: E402
-from visual_adaptive_servo.config import (  # noqa: E402
-    CONTROLLER_PARAMS,
-    CONTROLLER_SECTION,
-    SIM_PARAMS,
-    SIM_SECTION,
-    ConfigError,
-    load_scenario,
-    read_param_file,
-)
-from visual_adaptive_servo.controller_node import ControllerNode  # noqa: E402
-from visual_adaptive_servo.ros_params import to_ros  # noqa: E402
+from visual_adaptive_servo.ros.sim_node import SimNode  # noqa: E402
+from visual_adaptive_servo.recording import messages as m  # noqa: E402
+from visual_adaptive_servo.config.controller import CONTROLLER_PARAMS  # noqa: E402
+from visual_adaptive_servo.config.files import read_param_file  # noqa: E402
+from visual_adaptive_servo.config.scenario import load_scenario  # noqa: E402
+from visual_adaptive_servo.config.sim import SIM_PARAMS  # noqa: E402
+from visual_adaptive_servo.schema import CONTROLLER_SECTION, SIM_SECTION, ConfigError  # noqa: E402
+from visual_adaptive_servo.ros.controller_node import ControllerNode  # noqa: E402
+from visual_adaptive_servo.ros.params import to_ros  # noqa: E402
 from visual_adaptive_servo.runner import run_scenario  # noqa: E402
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",

@@ -17,7 +17,7 @@
 import numpy as np
 import pytest
 
-from visual_adaptive_servo import overlay
+from visual_adaptive_servo.vision import overlay
 
 
 @pytest.mark.parametrize("col, row, pixel", [(10.9, 5.2, (5, 10)), (10.0, 5.0, (5, 10)),

@@ -45,12 +45,21 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from conftest import PAPER_CONFIG
 from sim_bridge.simulator import Measurement, Simulator
-from visual_adaptive_servo import messages as m
-from visual_adaptive_servo.config import load_scenario
-from visual_adaptive_servo.controller import (AdaptiveVisualTracker, EstimatorState, health,
-                                              StepResult)
-from visual_adaptive_servo.recording import (CAMERA_TOPICS, CONTROLLER_NS, McapRecorder, SIM_NS,
-                                             TOPICS)
+from visual_adaptive_servo.recording import messages as m
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import (
+    AdaptiveVisualTracker,
+    EstimatorState,
+    health,
+    StepResult,
+)
+from visual_adaptive_servo.recording.recorder import (
+    CAMERA_TOPICS,
+    CONTROLLER_NS,
+    McapRecorder,
+    SIM_NS,
+    TOPICS,
+)
 from visual_adaptive_servo.runner import FrameDetections, run_scenario
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -522,7 +531,7 @@ def test_recorded_run_decodes_to_its_timeseries(tmp_path, scenario):
 
 def test_rendered_run_records_the_pictures_the_detector_saw(tmp_path):
     """Oracle: the detector, run again on the recorded pictures, gives the recorded features."""
-    from visual_adaptive_servo.detection import detect
+    from visual_adaptive_servo.vision.detection import detect
 
     scenario = load_scenario(PAPER_CONFIG, RENDERED)
     summary = run_scenario(scenario, str(tmp_path), duration=0.3, progress=False, plots=False)

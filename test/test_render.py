@@ -26,7 +26,7 @@ import pytest
 from sim_bridge import render
 from sim_bridge.camera import PinholeCamera
 from sim_bridge.plant import URDF_DIR, ArmPlant
-from visual_adaptive_servo import overlay
+from visual_adaptive_servo.vision import overlay
 
 WIDTH, HEIGHT = 320, 240
 
@@ -121,7 +121,8 @@ def test_rendered_marker_centroid_lands_on_its_projection():
     Pins the half-pixel shift of PyBullet's TinyRenderer (render.RENDER_PIXEL_SHIFT): without
     it the mean error is (+0.5, -0.5) raw pixels.
     """
-    from visual_adaptive_servo.detection import DetectorConfig, detect
+    from visual_adaptive_servo.config.detector import detector_config
+    from visual_adaptive_servo.vision.detection import detect
 
     client = pybullet.connect(pybullet.DIRECT)
     try:
@@ -131,9 +132,9 @@ def test_rendered_marker_centroid_lands_on_its_projection():
         body = pybullet.createMultiBody(baseMass=0.0, baseVisualShapeIndex=shape,
                                         baseCollisionShapeIndex=-1, physicsClientId=client)
         camera = PinholeCamera.paper()
-        config = DetectorConfig.from_params({"markers.colors": [230.0, 30.0, 30.0],
-                                             "pixel_origin": [320.0, 240.0],
-                                             "pixel_axes": [-1.0, -1.0]})
+        config = detector_config({"markers.colors": [230.0, 30.0, 30.0],
+                                  "pixel_origin": [320.0, 240.0],
+                                  "pixel_axes": [-1.0, -1.0]})
         rng = np.random.default_rng(3)
         errors = []
         for _ in range(30):

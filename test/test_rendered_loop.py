@@ -21,7 +21,7 @@ noiseless tracking error, and the loop's recovery after the marker is hidden.
 import numpy as np
 
 from conftest import PAPER_CONFIG
-from visual_adaptive_servo.config import load_scenario
+from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.runner import run_scenario
 
 RENDERED = ["sim_node.camera_mode=rendered", "sim_node.camera_rate=30.0"]

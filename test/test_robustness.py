@@ -18,7 +18,7 @@ The cases (start offsets, noise with the noise preset, late and slow cameras,
 wrong initial estimates, NaN bursts, lost frames, a rendered camera with a hidden
 marker, the URDF arms) are config/campaigns/robustness.yaml, run here by the
 campaign engine exactly as ``vas robustness`` runs them; the bounds are
-:data:`visual_adaptive_servo.robustness.BOUNDS`.
+:data:`visual_adaptive_servo.campaigns.robustness.BOUNDS`.
 """
 
 import os
@@ -28,8 +28,8 @@ import pytest
 
 from conftest import ROOT
 
-from visual_adaptive_servo.config import load_scenario
-from visual_adaptive_servo.robustness import BOUNDS, FAULT_CASES, run_matrix
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.campaigns.robustness import BOUNDS, FAULT_CASES, run_matrix
 
 CONFIG = os.path.join(ROOT, "config")
 

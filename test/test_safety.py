@@ -20,10 +20,20 @@ import numpy as np
 import pytest
 
 from conftest import PAPER_CONFIG
-from visual_adaptive_servo.config import ControllerConfig, load_scenario
-from visual_adaptive_servo.controller import (
-    AdaptiveVisualTracker, EstimatorState, Projection, control_law, health)
-from visual_adaptive_servo.trajectory import BlendedStart, SinusoidTrajectory, quintic_blend
+from visual_adaptive_servo.config.controller import ControllerConfig
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import (
+    AdaptiveVisualTracker,
+    EstimatorState,
+    Projection,
+    control_law,
+    health,
+)
+from visual_adaptive_servo.control.trajectory import (
+    BlendedStart,
+    SinusoidTrajectory,
+    quintic_blend,
+)
 
 Q0 = np.array([1.0807, 0.5756, -0.5000])
 T = 0.005
@@ -373,7 +383,7 @@ def test_joint_damping_is_off_when_the_inertia_estimate_is_zero():
     records = []
     handler = logging.Handler(logging.WARNING)
     handler.emit = records.append
-    logger = logging.getLogger("visual_adaptive_servo.controller")
+    logger = logging.getLogger("visual_adaptive_servo.control.controller")
     logger.addHandler(handler)
     try:
         ctl = controller(**{"joint_damping.inertia_rate": 20.0})   # the paper's a_d: no inertia

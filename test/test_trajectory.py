@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from visual_adaptive_servo.trajectory import TabulatedTrajectory
+from visual_adaptive_servo.control.trajectory import TabulatedTrajectory
 
 
 def table(periodic=True, m=2, n=201, duration=10.0):

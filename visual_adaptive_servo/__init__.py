@@ -14,10 +14,14 @@
 
 """visual_adaptive_servo: H. Wang's observer-based adaptive visual tracking (Automatica 2015).
 
-ROS-free core: :mod:`.model` (robot + camera regressors), :mod:`.controller`
-(the control law and the sampled controller), :mod:`.trajectory`,
-:mod:`.config`, :mod:`.runner` (in-process closed loop) and :mod:`.cli` (``vas``).
-The ROS 2 node is :mod:`.controller_node`.
+ROS-free core in subpackages by concern, lowest first: :mod:`.models` (robot +
+camera regressors), :mod:`.schema` (parameter specs and their rules),
+:mod:`.vision` (feature detection), :mod:`.control` (the law, the sampled
+controller, trajectories, baselines), :mod:`.recording` (messages, MCAP,
+summaries, plots), :mod:`.config` (the parameter file), :mod:`.runner` (the
+in-process closed loop) and :mod:`.teach`, :mod:`.campaigns` (many runs), and
+:mod:`.cli` (``vas``).  The simulator is the sibling package :mod:`sim_bridge`.
+The ROS 2 nodes are in :mod:`.ros`.  ``.importlinter`` states the layers.
 """
 
 __version__ = "0.1.0"

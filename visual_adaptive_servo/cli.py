@@ -28,10 +28,11 @@ import json
 import logging
 import sys
 
-from .campaign import add_parser as add_campaign_parser
-from .compare import add_parser as add_compare_parser
-from .compare import CONTROLLER_NAMES, controller_factory
-from .config import ConfigError, load_scenario
+from .campaigns.campaign import add_parser as add_campaign_parser
+from .campaigns.compare import add_parser as add_compare_parser
+from .config.scenario import load_scenario
+from .control.registry import CONTROLLER_NAMES, controller_factory
+from .schema import ConfigError
 from .teach import add_parser as add_teach_parser
 
 
@@ -82,7 +83,7 @@ def cmd_run(args):
 def cmd_robustness(args):
     import os
 
-    from .robustness import markdown_table, outside_bounds, run_matrix
+    from .campaigns.robustness import markdown_table, outside_bounds, run_matrix
 
     rows = run_matrix(args.out, args.workers, args.ray, args.duration, args.progress)
     table = markdown_table(rows)

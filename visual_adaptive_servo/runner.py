@@ -33,13 +33,12 @@ import numpy as np
 
 from sim_bridge.simulator import Simulator
 
-from . import messages as m
-from .controller import AdaptiveVisualTracker
-from .recording import McapRecorder, write_csv, write_json
+from .control.controller import AdaptiveVisualTracker
+from .recording import messages as m
+from .recording.recorder import McapRecorder, write_csv, write_json
+from .recording.summary import camera_figures, summarize
 
 log = logging.getLogger(__name__)
-
-RMS_WINDOW_S = 5.0
 
 
 class Progress:
@@ -109,8 +108,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         ``faults(step, measurement) -> measurement`` to inject bad input (tests).
     controller_factory : callable, optional
         ``controller_factory(scenario.controller)`` -> the controller, anything with
-        ``step(t, q, qd, x)`` returning a :class:`~.controller.StepResult`; default the
-        paper's :class:`~.controller.AdaptiveVisualTracker` (``vas compare`` passes
+        ``step(t, q, qd, x)`` returning a :class:`~.control.controller.StepResult`; default the
+        paper's :class:`~.control.controller.AdaptiveVisualTracker` (``vas compare`` passes
         the baselines).
     """
     os.makedirs(out_dir, exist_ok=True)
@@ -221,7 +220,7 @@ class FrameDetections:
         self.reasons = {}
 
     def detect(self, meas):
-        from .detection import detect
+        from .vision.detection import detect
 
         found = detect(meas.image, self.config)
         if found.pixels is None:
@@ -244,76 +243,6 @@ class FrameDetections:
                 "frames_without_features_by_reason": self.reasons}
 
 
-def camera_figures(frames, feature_camera):
-    """Frame counts and ages for summary.json: what the camera sent, what the controller used.
-
-    ``frames_dropped`` counts published frames the controller did not apply (refused:
-    invalid, out of order, too old); ``frame_age`` is the time from capture to use.
-    """
-    figures = {"frames_captured": feature_camera.captured,
-               "frames_published": feature_camera.published}
-    if frames is not None:
-        applied = frames["applied"]
-        figures.update(frames_applied=applied, frames_late=frames["late"],
-                       frames_dropped=frames["received"] - applied,
-                       frame_age_mean_s=frames["age_sum"] / applied if applied else math.nan,
-                       frame_age_max_s=frames["age_max"] if applied else math.nan)
-    return figures
-
-
-def summarize(data, status, wall, diverged, reason, counters, period):
-    """summary.json's figures of a run's samples ``data``.
-
-    The transient_* and torque ones are over t >= 5 s (:func:`.compare.run_figures`).
-    """
-    from .compare import run_figures    # numpy only; compare's figures of the same run
-
-    t = data["t"]
-    late = run_figures(t, data["x_true"], data["x_d"], data["tau"], period)
-    transient = {"transient_rms_true_error_px": late["rms_error_px"],
-                 "transient_max_true_error_px": late["max_error_px"],
-                 "torque_rms": late["torque_rms"], "torque_rate_rms": late["torque_rate_rms"]}
-    if len(t) == 0:
-        return {"diverged": diverged, "divergence_reason": reason, "final_rms_error_px": math.nan,
-                "max_error_px": math.nan, "max_abs_torque": math.nan,
-                "final_depth_error": math.nan, "sim_time_s": 0.0, "wall_time_s": wall,
-                "realtime_factor": 0.0, **transient, **counters}
-    window = t >= t[-1] - RMS_WINDOW_S + 1e-9
-    sim_time = float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0))
-    rms, peak = error_figures(data["x"], data["x_d"], window)
-    rms_true, peak_true = error_figures(data["x_true"], data["x_d"], window)
-    depth_err = data["z_hat"][-1] - data["z"][-1]
-    return {
-        "diverged": diverged,
-        "divergence_reason": reason,
-        "final_rms_error_px": rms,
-        "max_error_px": peak,
-        "final_rms_true_error_px": rms_true,
-        "max_true_error_px": peak_true,
-        "max_abs_torque": float(np.nanmax(np.abs(data["tau"]))),
-        "final_depth_error": float(depth_err[0]) if depth_err.size == 1 else depth_err.tolist(),
-        "min_estimated_depth": float(np.nanmin(data["z_hat"])),
-        "sim_time_s": sim_time,
-        "wall_time_s": wall,
-        "realtime_factor": sim_time / wall if wall > 0 else math.inf,
-        **transient,
-        **counters,
-    }
-
-
-def point_error(x, x_d):
-    """Per-sample largest point error max_i |x_i - x_d,i| [px] of (N, 2m) arrays -> (N,)."""
-    return np.linalg.norm((x - x_d).reshape(len(x), -1, 2), axis=2).max(axis=1)
-
-
-def error_figures(x, x_d, window):
-    """(RMS over ``window``, max) of :func:`point_error`, leaving out NaN samples."""
-    err = point_error(x, x_d)
-    valid = np.isfinite(err)
-    rms = float(np.sqrt(np.mean(err[window & valid] ** 2))) if np.any(window & valid) else math.nan
-    return rms, (float(np.max(err[valid])) if valid.any() else math.nan)
-
-
 def write_outputs(out_dir, data, status, model, summary, record, plots):
     columns, blocks = ["t"], [data["t"][:, None]]
     for key, names in (("x", None), ("x_true", None), ("x_d", None), ("x_obs", None), ("z", None),
@@ -330,7 +259,7 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
     if plots and len(data["t"]) > 1:
         # matplotlib costs ~0.5 s to import: only runs that plot pay it (campaign workers
         # and benchmarks run headless)
-        from .plots import plot_run
+        from .recording.plots import plot_run
 
         labels = {"a_z_perp": model.a_z_perp_labels, "a_z": model.a_z_labels,
                   "a_d": model.a_d_labels}

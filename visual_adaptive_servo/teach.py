@@ -35,7 +35,9 @@ import os
 
 import numpy as np
 
-from .config import SIM_SECTION, ConfigError, SimConfig, apply_overrides, read_param_file
+from .config.files import apply_overrides, read_param_file
+from .config.sim import SimConfig
+from .schema import ConfigError, SIM_SECTION
 
 
 def joint_path(q0, amplitudes, cycles, period):
@@ -53,7 +55,7 @@ def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0):
     Raises ValueError when a point leaves the picture or goes behind the camera.
     """
     from sim_bridge.plant import ArmPlant
-    from visual_adaptive_servo.models import GRAVITY
+    from .models import GRAVITY
 
     arm = sim_config.arm
     n = arm.n
@@ -139,7 +141,7 @@ def cmd_teach(args):
 
 
 def add_parser(subparsers, floats):
-    """Register ``vas teach`` (called by :func:`~.cli.build_parser`)."""
+    """Register ``vas teach`` (called by :func:`visual_adaptive_servo.cli.build_parser`)."""
     p = subparsers.add_parser("teach", help="record a realisable image trajectory by moving the "
                               "simulated arm (teach by showing)")
     p.add_argument("--config", required=True, help="parameter YAML (its sim_node section: arm, "

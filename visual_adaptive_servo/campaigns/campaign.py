@@ -15,9 +15,9 @@
 """``vas campaign``: many randomized closed-loop runs, on every core or on a Ray cluster.
 
 ``vas campaign --spec FILE --out DIR [--workers N] [--ray auto|ADDRESS] [--runs N]``
-resolves every run of the spec (:mod:`.campaign_spec`), executes the ones DIR
-does not hold yet (:mod:`.campaign_engine`) and reports them all
-(:mod:`.campaign_report`).  In DIR:
+resolves every run of the spec (:mod:`.spec`), executes the ones DIR
+does not hold yet (:mod:`.engine`) and reports them all
+(:mod:`.report`).  In DIR:
 
 * ``campaign.json``: the spec and its fingerprint (a DIR made by another spec is
   refused), ``campaign.lock`` (one campaign at a time in a DIR);
@@ -39,9 +39,9 @@ import os
 import sys
 import time
 
-from .campaign_engine import (CampaignError, execute_run, FIGURES, ProcessPool, RayCluster,
-                              RunResult)
-from .campaign_spec import load_spec, yaml_text
+from .engine import (CampaignError, execute_run, FIGURES, ProcessPool, RayCluster,
+                     RunResult)
+from .spec import load_spec, yaml_text
 
 CSV_NAME = "runs.csv"
 META_NAME = "campaign.json"
@@ -220,8 +220,8 @@ def run_campaign(spec_path, out_dir, workers=None, ray=None, limit=None, run_fn=
 
 def _run_and_report(spec, runs, out_dir, workers, ray, limit, run_fn, progress, on_start,
                     on_row):
-    from .campaign_report import markdown, plot_campaign, summarize
-    from .recording import write_json
+    from ..recording.recorder import write_json
+    from .report import markdown, plot_campaign, summarize
 
     columns = columns_of(spec)
     done = prepare_out_dir(out_dir, spec, columns)
@@ -244,7 +244,7 @@ def _run_and_report(spec, runs, out_dir, workers, ray, limit, run_fn, progress, 
 
 def _execute(todo, spec, out_dir, workers, ray, run_fn, progress, on_start, on_row):
     """Run ``todo``, appending a row as each ends; (rows written, interrupted, wall s)."""
-    from .runner import Progress
+    from ..runner import Progress
 
     bar = Progress(len(todo), progress)
     counts = {"done": 0, "failed": 0}
@@ -309,7 +309,7 @@ def cmd_campaign(args):
 
 
 def add_parser(subparsers):
-    """Register ``vas campaign`` (called by :func:`~.cli.build_parser`)."""
+    """Register ``vas campaign`` (called by :func:`visual_adaptive_servo.cli.build_parser`)."""
     cmd = subparsers.add_parser("campaign", help="many randomized runs from a spec, on every "
                                 "core or on a Ray cluster; resumable")
     cmd.add_argument("--spec", required=True, help="campaign spec (YAML), e.g. "

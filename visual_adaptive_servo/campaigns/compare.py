@@ -17,24 +17,13 @@
 The comparison is a campaign (:mod:`.campaign`): ``config/campaigns/compare.yaml``
 names the conditions (cases: noise, camera delay, wrong estimates, slow and late
 cameras) and crosses them with the base configurations (config/paper_3dof.yaml and
-the noise-robust preset) and :data:`CONTROLLER_NAMES`:
-
-``observer``
-    the paper's controller (H. Wang 2015): image-space observer, no image velocity,
-    late frames applied at their capture time and predicted to now;
-``observer-uncompensated``
-    the same controller taking each frame as current when it arrives;
-``velocity-diff``
-    :class:`~.baselines.VelocityAdaptiveTracker` on the raw backward difference
-    of the pixels (prediction-error gain 1e-3);
-``velocity-lp``
-    the same with a first-order low-pass of time constant 0.1 s;
-``ibvs-calibrated``
-    :class:`~.baselines.CalibratedIBVS`, true camera and arm: the upper reference.
+the noise-robust preset) and every controller of
+:mod:`visual_adaptive_servo.control.registry` (the paper's and its baselines).
 
 The adaptive controllers all use the base configuration's gains, initial
 estimates, bounds and torque limit; every controller gets the same camera frames.
-Figures of one run, over the window after the transient (t >= 5 s):
+Figures of one run, over the window after the transient (t >= 5 s;
+:func:`visual_adaptive_servo.recording.summary.run_figures`):
 
 * RMS and max of the true image error, max_i |x_true,i - x_d,i| [px], from the
   noiseless pixels: the tracking itself, not the measurement noise;
@@ -59,12 +48,11 @@ import os
 
 import numpy as np
 
-PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# the names of controllers(), known without importing the controllers (vas start-up)
-CONTROLLER_NAMES = ("observer", "observer-uncompensated", "velocity-diff", "velocity-lp",
-                    "ibvs-calibrated")
-SPEC = os.path.join(PACKAGE_ROOT, "config", "campaigns", "compare.yaml")
-TRANSIENT_S = 5.0
+from ..control.registry import controllers
+from ..models.resources import OWN_SHARE
+from ..recording.summary import point_error, TRANSIENT_S
+
+SPEC = os.path.join(OWN_SHARE["config"], "campaigns", "compare.yaml")
 LABELS = {"clean": "clean", "noise_0.25": "pixel noise 0.25 px", "noise_0.5": "pixel noise 0.5 px",
           "noise_1": "pixel noise 1 px", "delay_1": "camera 5 ms late (1 frame)",
           "delay_2": "camera 10 ms late (2 frames)",
@@ -73,39 +61,6 @@ LABELS = {"clean": "clean", "noise_0.25": "pixel noise 0.25 px", "noise_0.5": "p
           "camera_30hz_33ms": "camera 30 Hz, 33 ms late, 1 kHz joints",
           "camera_30hz_66ms": "camera 30 Hz, 66 ms late, 1 kHz joints",
           "camera_60hz_20ms": "camera 60 Hz, 20 ms late, 1 kHz joints"}
-LOW_PASS_S = 0.1
-PREDICTION_GAIN = 1e-3
-
-
-def controllers():
-    """(name, description, factory) of every compared controller."""
-    from .baselines import CalibratedIBVS, FrameHoldingTracker, VelocityAdaptiveTracker
-    from .controller import AdaptiveVisualTracker
-
-    return (
-        ("observer", "Wang 2015: observer, no image velocity (this package)",
-         AdaptiveVisualTracker),
-        ("observer-uncompensated", "the same, each camera frame taken as current when it "
-         "arrives (no latency compensation)", FrameHoldingTracker),
-        ("velocity-diff", "velocity-based adaptive, backward-difference image velocity",
-         functools.partial(VelocityAdaptiveTracker, prediction_gain=PREDICTION_GAIN)),
-        ("velocity-lp", f"velocity-based adaptive, backward difference + {LOW_PASS_S:g} s "
-         "first-order low-pass",
-         functools.partial(VelocityAdaptiveTracker, filter_time=LOW_PASS_S,
-                           prediction_gain=PREDICTION_GAIN)),
-        ("ibvs-calibrated", "calibrated IBVS + computed torque (true camera and arm)",
-         CalibratedIBVS),
-    )
-
-
-def controller_factory(name):
-    """The factory of the controller called ``name`` (one of :data:`CONTROLLER_NAMES`)."""
-    from .config import ConfigError
-
-    for known, _, factory in controllers():
-        if known == name:
-            return factory
-    raise ConfigError(f"controller: must be one of {list(CONTROLLER_NAMES)}, got {name!r}")
 
 
 def read_timeseries(path):
@@ -122,29 +77,6 @@ def read_timeseries(path):
     return t, block("x_true"), block("x_d"), block("tau")
 
 
-def run_figures(t, x_true, x_d, tau, period, transient=TRANSIENT_S):
-    """The figures of one run over t >= ``transient`` (see the module docstring)."""
-    from .runner import point_error     # lazy like run_compare's: keeps `vas` start-up light
-
-    nan = math.nan
-    err = point_error(x_true, x_d)
-    window = (t >= transient - 1e-9) & np.isfinite(err)
-    figures = {"rms_error_px": nan, "max_error_px": nan, "torque_rms": nan,
-               "torque_rate_rms": nan, "window_s": 0.0}
-    if not window.any():
-        return figures
-    rate = np.diff(tau, axis=0) / period
-    rate_window = window[1:] & window[:-1]
-    figures.update(
-        rms_error_px=float(np.sqrt(np.mean(err[window] ** 2))),
-        max_error_px=float(np.max(err[window])),
-        torque_rms=float(np.sqrt(np.mean(np.sum(tau[window] ** 2, axis=1)))),
-        torque_rate_rms=(float(np.sqrt(np.mean(np.sum(rate[rate_window] ** 2, axis=1))))
-                         if rate_window.any() else nan),
-        window_s=float(np.count_nonzero(window) * period))
-    return figures
-
-
 def run_compare(out_dir, spec=SPEC, workers=None, ray=None, duration=None, seed=None,
                 progress=None):
     """Run the comparison campaign in ``out_dir``; return the list of result dicts.
@@ -153,8 +85,8 @@ def run_compare(out_dir, spec=SPEC, workers=None, ray=None, duration=None, seed=
     to the campaign engine (``workers`` processes, or Ray), resumable like any campaign.
     """
     from .campaign import CSV_NAME, read_rows, run_campaign
-    from .campaign_engine import execute_run
-    from .campaign_spec import derived_spec, load_spec
+    from .engine import execute_run
+    from .spec import derived_spec, load_spec
 
     os.makedirs(out_dir, exist_ok=True)
     if duration is not None or seed is not None:
@@ -288,8 +220,6 @@ def plot_compare(results, out_dir, transient=TRANSIENT_S):
 
 
 def _plot_timeseries(results, out_dir, configs, names, plt):
-    from .runner import point_error
-
     shown = ("clean", "noise_0.5", "camera_30hz_33ms")
     fig, axes = plt.subplots(len(configs), len(shown), figsize=(12, 3.2 * len(configs)),
                              squeeze=False, sharex=True)
@@ -322,7 +252,7 @@ def _plot_timeseries(results, out_dir, configs, names, plt):
 
 def cmd_compare(args):
     """``vas compare``: run the comparison campaign, write compare.md/.json and the plots."""
-    from .recording import write_json
+    from ..recording.recorder import write_json
 
     results = run_compare(args.out, args.spec, args.workers, args.ray, args.duration, args.seed,
                           args.progress)
@@ -340,13 +270,13 @@ def cmd_compare(args):
 
 
 def _spec_duration(spec):
-    from .campaign_spec import load_spec
+    from .spec import load_spec
 
     return load_spec(spec).duration
 
 
 def add_parser(subparsers):
-    """Register ``vas compare`` (called by :func:`~.cli.build_parser`)."""
+    """Register ``vas compare`` (called by :func:`visual_adaptive_servo.cli.build_parser`)."""
     cmp = subparsers.add_parser("compare", help="the paper's controller against baselines "
                                 "(velocity-based adaptive, calibrated IBVS), as a campaign")
     cmp.add_argument("--out", required=True, help="output folder (created; rerun to resume)")

@@ -14,7 +14,7 @@
 
 """Executing many runs at once: long-lived worker processes on this machine, or Ray tasks.
 
-Both engines take resolved runs (:class:`~.campaign_spec.Run`) and call
+Both engines take resolved runs (:class:`~.spec.Run`) and call
 ``on_result(RunResult)`` in the calling process as each run ends, in the order
 they end.  The run function (default :func:`execute_run`) is injectable.
 
@@ -51,14 +51,15 @@ from collections import deque
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 
+from ..models.resources import PACKAGE_PARENT
+
 FIGURES = ("diverged", "final_rms_error_px", "final_rms_true_error_px", "max_error_px",
            "max_true_error_px", "max_abs_torque", "min_estimated_depth", "rejected", "fallback",
            "frames_dropped", "sim_time_s",
-           # vas compare's figures over t >= 5 s (compare.run_figures, in summary.json)
+           # vas compare's figures over t >= 5 s (recording.summary.run_figures)
            "transient_rms_true_error_px", "transient_max_true_error_px", "torque_rms",
            "torque_rate_rms")
 MAX_ATTEMPTS = 2
-PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RAY_MISSING = ("--ray needs Ray, an optional extra: pip install 'visual_adaptive_servo[ray]' "
                "(or pip install ray)")
 
@@ -90,9 +91,9 @@ def execute_run(run, keep_dir=None):
     ``keep_dir/<run index>`` (``vas compare`` plots from them); by default they go to
     a scratch folder.
     """
-    from .compare import controller_factory
-    from .config import load_scenario
-    from .runner import run_scenario
+    from ..config.scenario import load_scenario
+    from ..control.registry import controller_factory
+    from ..runner import run_scenario
 
     scenario = load_scenario(run.base, run.overrides)
     factory = controller_factory(run.controller)
@@ -173,7 +174,8 @@ def _worker_main(conn, run_fn, log_path, cwd):
                         format=f"worker {os.getpid()} %(levelname)s %(name)s: %(message)s")
     # numpy, PyBullet and the controllers before the first run's clock starts (a no-op
     # when the fork server preloaded them)
-    from . import baselines, runner  # noqa: F401
+    from .. import runner  # noqa: F401
+    from ..control import baselines  # noqa: F401
     while True:
         try:
             run = conn.recv()
@@ -210,8 +212,8 @@ class ProcessPool:
         self.context = multiprocessing.get_context("forkserver")
         # the fork server imports these once; each worker forked from it starts in
         # milliseconds instead of importing numpy, PyBullet and the controllers again
-        self.context.set_forkserver_preload([f"{__package__}.runner",
-                                             f"{__package__}.baselines"])
+        self.context.set_forkserver_preload(["visual_adaptive_servo.runner",
+                                             "visual_adaptive_servo.control.baselines"])
         self.workers = []
 
     def _spawn(self):

@@ -25,10 +25,9 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
+from ..models.resources import OWN_SHARE
 
-PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SPEC = os.path.join(PACKAGE_ROOT, "config", "campaigns", "robustness.yaml")
+SPEC = os.path.join(OWN_SHARE["config"], "campaigns", "robustness.yaml")
 #: true RMS image error over the last 5 s of each case must stay under this [px]
 BOUNDS = {
     "start 5 px off": 0.1, "start 20 px off": 0.15, "start 50 px off": 0.15,
@@ -49,19 +48,6 @@ FAULT_CASES = ("NaN pixels 0.1 s", "NaN joint states 0.03 s",
                "every 10th frame lost + 0.3 s outage", "rendered camera, marker hidden 0.3 s")
 
 
-def joints_seeing(model, pixels, q_start, iterations=50):
-    """Joint positions near ``q_start`` whose features project to ``pixels`` (Newton)."""
-    q = np.array(q_start, dtype=float)
-    for _ in range(iterations):
-        x, z = model.project(q)
-        err = pixels - x
-        if np.max(np.abs(err)) < 1e-9:
-            return q
-        J = model.true_image_jacobian(q, x) / np.repeat(z, 2)[:, None]
-        q = q + np.linalg.pinv(J) @ err
-    raise ValueError(f"no joint positions near {list(q_start)} see the feature at {pixels}")
-
-
 def run_matrix(out_dir, workers=None, ray=None, duration=None, progress=None, spec=SPEC):
     """Run (or resume) the matrix in ``out_dir``; return its rows, in the spec's order.
 
@@ -69,7 +55,7 @@ def run_matrix(out_dir, workers=None, ray=None, duration=None, progress=None, sp
     and ``bound``.
     """
     from .campaign import CSV_NAME, read_rows, run_campaign
-    from .campaign_spec import derived_spec, load_spec
+    from .spec import derived_spec, load_spec
 
     if duration is not None:
         spec = derived_spec(spec, os.path.join(out_dir, "robustness_spec.yaml"),

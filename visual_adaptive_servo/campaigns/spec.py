@@ -48,14 +48,15 @@ Factors (:data:`FACTOR_HELP`):
 * ``start_offset_px`` [px] (with ``start_offset_angle_deg``, default the direction
   (0.6, -0.8) of ``vas robustness``): joint positions near the initial ones whose
   feature is that far from the trajectory start x_d(0), found by
-  :func:`~.robustness.joints_seeing`; ``start_offset_joint`` [rad] (a number or
+  :func:`joints_seeing`; ``start_offset_joint`` [rad] (a number or
   one per joint) is then added to the initial positions;
 * ``estimate_scale.<a_z_perp|a_z|a_d>``: initial estimate = the model's true
   parameters times the factor;
 * ``gain_scale.<K|alpha|gamma|Gamma_d|Gamma_z_perp|Gamma_z>``: the base gain times
   the factor; ``trajectory.amplitude_scale`` (a_cos, a_sin) and
   ``trajectory.frequency_scale`` (omega) likewise;
-* ``controller``: one of :data:`~.compare.CONTROLLER_NAMES`; ``base``: another
+* ``controller``: one of
+  :data:`~visual_adaptive_servo.control.registry.CONTROLLER_NAMES`; ``base``: another
   base configuration for this run.
 
 Every run resolves to plain ``section.param=value`` overrides, a controller and a
@@ -75,13 +76,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
-from .compare import CONTROLLER_NAMES
-from .config import (CONTROLLER_PARAMS, CONTROLLER_SECTION, ConfigError, load_scenario,
-                     SIM_PARAMS, SIM_SECTION)
-from .trajectory import SinusoidTrajectory
+from ..config.controller import CONTROLLER_PARAMS
+from ..config.scenario import load_scenario
+from ..config.sim import SIM_PARAMS
+from ..control.registry import CONTROLLER_NAMES
+from ..control.trajectory import SinusoidTrajectory
+from ..models.resources import OWN_SHARE
+from ..schema import CONTROLLER_SECTION, ConfigError, SIM_SECTION
 
-PACKAGE_CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                              "config")
+PACKAGE_CONFIG = OWN_SHARE["config"]
 DEFAULT_CONTROLLER = "observer"
 ALIASES = {"pixel_noise": f"{SIM_SECTION}.pixel_noise_std",
            "camera_latency": f"{SIM_SECTION}.camera_latency",
@@ -582,8 +585,6 @@ def resolve_overrides(factors, base):
 
 def _start_positions(factors, values, base, base_value):
     """Initial joint positions [rad] of the start_offset factors, and a problem or ''."""
-    from .robustness import joints_seeing      # imports the simulator: only when needed
-
     model = base.controller.model              # with the simulator's ground truth
     key = f"{SIM_SECTION}.initial_positions"
     q = np.array(values.get(key, base_value(key)), dtype=float)
@@ -612,3 +613,16 @@ def _start_positions(factors, values, base, base_value):
                                 f"got {offset.size}")
         q = q + offset
     return q.tolist(), ""
+
+
+def joints_seeing(model, pixels, q_start, iterations=50):
+    """Joint positions near ``q_start`` whose features project to ``pixels`` (Newton)."""
+    q = np.array(q_start, dtype=float)
+    for _ in range(iterations):
+        x, z = model.project(q)
+        err = pixels - x
+        if np.max(np.abs(err)) < 1e-9:
+            return q
+        J = model.true_image_jacobian(q, x) / np.repeat(z, 2)[:, None]
+        q = q + np.linalg.pinv(J) @ err
+    raise ValueError(f"no joint positions near {list(q_start)} see the feature at {pixels}")

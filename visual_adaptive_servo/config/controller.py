@@ -12,198 +12,32 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Configuration: one ROS-style YAML file configures the simulator and the controller.
+"""The controller's section (``controller_node``): its parameter specs and validated configuration.
 
-The file has a ``sim_node:`` and a ``controller_node:`` section, each with
-``ros__parameters:``; nested mappings become dotted parameter names
-(``projection: {min_depth: 0.5}`` is ``projection.min_depth``), exactly as
-ROS 2 flattens them.  The same schema (:data:`SIM_PARAMS`,
-:data:`CONTROLLER_PARAMS`) drives the ROS nodes' parameter declarations and
-``vas run``, and :meth:`SimConfig.from_params` / :meth:`ControllerConfig.from_params`
-validate a complete parameter set at once: an invalid value is refused with the
-parameter name and the rule it breaks, and nothing is partially applied.  The
-feature detector's schema, :data:`DETECTOR_PARAMS`, is validated the same way
-by :meth:`detection.DetectorConfig.from_params`.
+:class:`ControllerConfig` holds the model (built from the structure parameters),
+the gains, the initial estimates (by default from a guessed camera and the
+model's nominal lengths), the bounds of the projection, the safety settings and
+the desired trajectory x_d.
 """
 
 from __future__ import annotations
 
-import math
-import os
-from dataclasses import dataclass, field
-from typing import Any, Callable
+from dataclasses import dataclass
 
 import numpy as np
-import yaml
 
 from sim_bridge.camera import PinholeCamera
 
-from .models import MODEL_NAMES, RobotCameraModel, make_model
-from .models.urdf_arm import check_feature_points
-from .models.urdf_chain import load_chain
-from .resources import resolve_path
-from .trajectory import TRAJECTORY_TYPES, SinusoidTrajectory, TabulatedTrajectory
+from ..control.controller import check_alpha_gamma
+from ..control.trajectory import SinusoidTrajectory, TabulatedTrajectory, TRAJECTORY_TYPES
+from ..models import make_model, MODEL_NAMES, RobotCameraModel
+from ..models.resources import resolve_path
+from ..schema import (CONTROLLER_SECTION, ConfigError, INF, ParamSpec, require_finite,
+                      require_length, resolve_params, TIMING_MODES, ValidatedParams)
+from .common import camera_specs, check_image_bounds, structure_specs
 
-SIM_SECTION = "sim_node"
-CONTROLLER_SECTION = "controller_node"
-DETECTOR_SECTION = "feature_detector"
-TIMING_MODES = ("lockstep", "realtime")
 STRUCTURE_NAMES = ("model", "urdf", "base_link", "tip_link", "feature_points", "unknown_lengths")
 FALLBACKS = ("gravity_compensation", "zero_torque")
-CAMERA_MODES = ("points", "rendered")
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or breaks a rule (message names it)."""
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One declared parameter.
-
-    ``default`` is a value or a callable ``default(structure, values)`` of the
-    structure (the model, or the simulator's arm: n, m, joint names) and of the
-    values resolved so far, for lengths that depend on n, m or the parameter
-    counts and for estimates computed from other parameters.  ``kind`` is one
-    of ``float``, ``int``, ``bool``, ``str``, ``float_list``, ``str_list``.
-    ``low``/``high`` are inclusive bounds applied to every element.
-    ``runtime`` marks parameters that may safely change while running;
-    ``structure`` those that define the model (read first).
-    """
-
-    name: str
-    default: Any
-    kind: str
-    description: str
-    low: float | None = None
-    high: float | None = None
-    runtime: bool = False
-    structure: bool = False
-
-    @property
-    def computed(self):
-        """The default depends on the structure or on other parameters."""
-        return callable(self.default)
-
-    def default_for(self, structure, values):
-        return self.default(structure, values) if callable(self.default) else self.default
-
-
-INF = math.inf
-PAPER_URDF = "package://visual_adaptive_servo/urdf/paper_rrr.urdf"
-MARKER_COLORS = (230.0, 30.0, 30.0, 30.0, 200.0, 30.0, 40.0, 90.0, 255.0)   # red, green, blue
-
-
-def camera_specs(prefix, what):
-    """The parameters of one pinhole camera (defaults: the paper's camera)."""
-    return (
-        ParamSpec(prefix + "position", [-5.0, 0.0, 0.0], "float_list",
-                  f"{what}: centre in the URDF root frame [m]."),
-        ParamSpec(prefix + "orientation", "look_at", "str",
-                  f"{what}: 'look_at' (use look_at and up) or 'rpy' (use rpy)."),
-        ParamSpec(prefix + "look_at", [0.0, 0.0, 0.0], "float_list",
-                  f"{what}: a point on the optical axis [m]."),
-        ParamSpec(prefix + "up", [0.0, 0.0, 1.0], "float_list",
-                  f"{what}: the direction that points up in the picture."),
-        ParamSpec(prefix + "rpy", [0.0, 0.0, 0.0], "float_list",
-                  f"{what}: orientation of the camera frame (X right, Y down, Z along the "
-                  f"optical axis) as URDF roll-pitch-yaw [rad]."),
-        ParamSpec(prefix + "focal_length", 0.15, "float", f"{what}: focal length f [m].",
-                  1e-9, None),
-        ParamSpec(prefix + "pixel_scale", [900.0, 900.0], "float_list",
-                  f"{what}: pixel scales beta_x, beta_y [px/m].", 0.0, None),
-        ParamSpec(prefix + "principal_point", [320.0, 240.0], "float_list",
-                  f"{what}: principal point in raw image coordinates [px]."),
-        ParamSpec(prefix + "image_size", [640.0, 480.0], "float_list",
-                  f"{what}: picture width and height [px].", 1.0, None),
-        ParamSpec(prefix + "pixel_origin", [320.0, 240.0], "float_list",
-                  f"{what}: raw image point that is the controller's pixel origin [px]."),
-        ParamSpec(prefix + "pixel_axes", [-1.0, -1.0], "float_list",
-                  f"{what}: +1/-1 per axis: controller pixel = axes * (raw - origin)."),
-    )
-
-
-def _structure_specs(default_urdf, default_base, default_tip, default_points, what):
-    return (
-        ParamSpec("urdf", default_urdf, "str",
-                  f"URDF of the arm{what} (file path, package:// or pybullet_data://).",
-                  structure=True),
-        ParamSpec("base_link", default_base, "str", "Fixed base link of the chain.",
-                  structure=True),
-        ParamSpec("tip_link", default_tip, "str", "Link carrying the feature points.",
-                  structure=True),
-        ParamSpec("feature_points", default_points, "float_list",
-                  "Offsets c_i of the m = 1..3 feature points in the tip link frame, 3 numbers "
-                  "each [m].", structure=True),
-    )
-
-
-SIM_PARAMS = _structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "") + (
-    ParamSpec("physics_dt", 0.001, "float", "PyBullet physics step [s].", 1e-5, 0.01),
-    ParamSpec("control_period", 0.005, "float",
-              "Camera frame / control period [s]; a whole multiple of physics_dt.", 1e-4, 1.0),
-    ParamSpec("duration", 0.0, "float", "Stop after this simulated time [s]; 0 = run forever.",
-              0.0, None),
-    ParamSpec("initial_positions", lambda s, v: [0.0] * s.n, "float_list",
-              "Joint positions at start [rad or m]."),
-    ParamSpec("initial_velocities", lambda s, v: [0.0] * s.n, "float_list",
-              "Joint velocities at start [rad/s or m/s]."),
-    ParamSpec("joint_names", lambda s, v: list(s.joint_names), "str_list",
-              "Joint names in /joint_states and the command order (default: the URDF chain's)."),
-    ParamSpec("camera_mode", "points", "str",
-              "points: the camera reports the projected feature points (plus pixel_noise_std); "
-              "rendered: it renders pictures (/camera/image_raw) and a feature detector finds "
-              "the markers in them."),
-    ParamSpec("pixel_noise_std", 0.0, "float", "Gaussian pixel noise std [px] (points mode).",
-              0.0, 100.0),
-    ParamSpec("camera_rate", 0.0, "float",
-              "Camera frames per second; 0 = one frame per control_period [Hz].", 0.0, None),
-    ParamSpec("camera_latency", 0.0, "float",
-              "Time from a frame's capture to its publication, rounded up to the control period "
-              "[s]; the frame is stamped with its capture time.", 0.0, 10.0),
-    ParamSpec("seed", 0, "int", "Seed of the pixel noise generator.", 0, 2**31 - 1),
-) + camera_specs("camera.", "Simulated camera") + (
-    ParamSpec("markers.radius", 0.03, "float",
-              "Radius of the coloured sphere drawn at each feature point [m].", 1e-4, 1.0),
-    ParamSpec("markers.colors", lambda s, v: list(MARKER_COLORS[:3 * s.m]), "float_list",
-              "RGB 0-255 of each feature point's marker, 3 numbers per point.", 0.0, 255.0),
-    ParamSpec("faults.nan_pixels", [0.0, 0.0], "float_list",
-              "Fault injection: frames captured in [start, start + length] carry NaN pixels "
-              "[s, s]; length 0 = off.", 0.0, None),
-    ParamSpec("faults.nan_joint_states", [0.0, 0.0], "float_list",
-              "Fault injection: joint positions read NaN in [start, start + length] [s, s].",
-              0.0, None),
-    ParamSpec("faults.dropout", [0.0, 0.0], "float_list",
-              "Fault injection: frames captured in [start, start + length] are lost [s, s].",
-              0.0, None),
-    ParamSpec("faults.occlusion", [0.0, 0.0], "float_list",
-              "Fault injection: point 1 hidden in [start, start + length] [s, s] (rendered: an "
-              "occluder in front of it; points: its frames are lost).", 0.0, None),
-    ParamSpec("faults.drop_every", 0, "int",
-              "Fault injection: every k-th frame is lost; 0 = none.", 0, None),
-    ParamSpec("timing_mode", "lockstep", "str",
-              "lockstep: wait for the command answering each state; realtime: wall-clock timer."),
-    ParamSpec("command_timeout", 1.0, "float",
-              "lockstep: wall time to wait for a command before applying zero torque (and, "
-              "with frame_ack, for a frame's acknowledgement) [s].", 1e-3, 60.0),
-    ParamSpec("frame_ack", False, "bool",
-              "lockstep: after publishing a camera frame, wait until every subscriber has "
-              "acknowledged it before the joint state follows (wait_for_all_acked). Costs up to "
-              "a DDS heartbeat period per frame (about 100 ms with Cyclone DDS's defaults); "
-              "without it the frame is published first and, on one host, arrives first."),
-    ParamSpec("detector_timeout", 0.5, "float",
-              "lockstep, rendered: wall time to wait for the feature detector to have processed "
-              "a picture (/feature_detector/processed) before the joint state follows [s].",
-              1e-3, 60.0),
-    ParamSpec("start.wait_for_recorder", False, "bool",
-              "Start only once every recorded topic (visual_adaptive_servo.recording.TOPICS) "
-              "has a subscriber and /joint_states, /clock and the features have two (the "
-              "controller's and a recorder's); ros2 launch sets it with record:=true."),
-    ParamSpec("render.enabled", False, "bool", "Publish the camera view on ~/image."),
-    ParamSpec("render.rate", 10.0, "float", "Rendering rate [Hz].", 0.1, 60.0),
-    ParamSpec("render.width", 320, "int", "Rendered image width [px].", 16, 1920),
-    ParamSpec("render.height", 240, "int", "Rendered image height [px].", 16, 1080),
-)
 
 
 def _nominal(model, values):
@@ -218,7 +52,7 @@ CONTROLLER_PARAMS = (
               f"Robot + camera model: one of {list(MODEL_NAMES)} (paper_rrr: the paper's arm, "
               f"derived by hand; urdf: any serial arm from urdf/base_link/tip_link).",
               structure=True),
-) + _structure_specs("", "", "", [0.0, 0.0, 0.0], " (model urdf)") + (
+) + structure_specs("", "", "", [0.0, 0.0, 0.0], " (model urdf)") + (
     ParamSpec("unknown_lengths", ["all"], "str_list",
               "model urdf: names of the lengths adapted as unknown (joint.x/y/z, point1.x, ...), "
               "or [all]; the others are taken from the URDF.", structure=True),
@@ -340,239 +174,6 @@ CONTROLLER_PARAMS = (
               "|tau| above this (before saturation) is reported as divergence [N m].", 0.0, None),
 )
 
-DETECTOR_PARAMS = (
-    ParamSpec("markers.colors", list(MARKER_COLORS[:3]), "float_list",
-              "Marker colours as the camera sees them, RGB 0-255, three values per marker "
-              "(1 to 3 markers), in feature order (default: the simulator's first marker).",
-              0.0, 255.0, True),
-    ParamSpec("markers.tolerance", 40.0, "float",
-              "A pixel belongs to a marker when each of its R, G, B is within this of the "
-              "marker's colour.", 0.0, 255.0, True),
-    ParamSpec("blob_area", [10.0, 50000.0], "float_list",
-              "[min, max] area of a marker blob [px]; blobs outside are not markers.",
-              1.0, None, True),
-    ParamSpec("pixel_origin", [320.0, 240.0], "float_list",
-              "Image point (column, row) [px] that is pixel (0, 0) of the controller; "
-              "continuous image coordinates, the top-left corner of the image is (0, 0). "
-              "The default is the paper's camera (origin on the optical axis) for 640x480."),
-    ParamSpec("pixel_axes", [-1.0, -1.0], "float_list",
-              "+1 or -1 per axis: u = axes[0] (column - origin[0]), v = axes[1] (row - "
-              "origin[1]); [1, 1] for a standard camera, [-1, -1] for the paper's (u to the "
-              "left, v up)."),
-    ParamSpec("overlay.enabled", True, "bool",
-              "Publish ~/overlay: the image with x, x_d and x_o drawn (for image viewers)."),
-    ParamSpec("timing_mode", "lockstep", "str",
-              "QoS of the image subscription and the features publisher; must match the "
-              "camera's and the controller's (lockstep: reliable; realtime: best-effort "
-              "sensor data)."),
-)
-
-
-def _to_value(spec, value, section):
-    where = f"{section}.{spec.name}"
-    kind = spec.kind
-    if kind == "str":
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: must be a string, got {value!r}")
-        return value
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: must be true or false, got {value!r}")
-        return value
-    if kind == "int":
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ConfigError(f"{where}: must be an integer, got {value!r}")
-        _check_range(spec, [value], where)
-        return int(value)
-    if kind == "float":
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
-            raise ConfigError(f"{where}: must be a number, got {value!r}")
-        value = float(value)
-        if math.isnan(value):
-            raise ConfigError(f"{where}: must not be NaN")
-        _check_range(spec, [value], where)
-        return value
-    if kind == "str_list":
-        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
-            raise ConfigError(f"{where}: must be a list of strings, got {value!r}")
-        return tuple(value)
-    if kind == "float_list":
-        if not isinstance(value, (list, tuple, np.ndarray)) or any(
-                isinstance(v, bool) or not isinstance(v, (int, float, np.number)) for v in value):
-            raise ConfigError(f"{where}: must be a list of numbers, got {value!r}")
-        arr = np.array(value, dtype=float)
-        if np.isnan(arr).any():
-            raise ConfigError(f"{where}: must not contain NaN")
-        _check_range(spec, arr, where)
-        arr.setflags(write=False)
-        return arr
-    raise AssertionError(kind)
-
-
-def _check_range(spec, values, where):
-    for v in values:
-        if spec.low is not None and v < spec.low:
-            raise ConfigError(f"{where}: must be >= {spec.low}, got {v}")
-        if spec.high is not None and v > spec.high:
-            raise ConfigError(f"{where}: must be <= {spec.high}, got {v}")
-
-
-def resolve_params(specs, params, section, build_structure):
-    """Check names and types of a flat parameter dict and fill defaults, structure first.
-
-    ``build_structure(values)`` turns the structure parameters into the object the
-    computed defaults need (a model, or the simulator's arm); a ValueError it raises
-    becomes a ConfigError.  Returns ``(structure, values)``.
-    """
-    specs_by_name = {s.name: s for s in specs}
-    unknown = sorted(set(params) - set(specs_by_name))
-    if unknown:
-        raise ConfigError(f"{section}: unknown parameter(s) {unknown}")
-    values = {}
-    ordered = ([s for s in specs if s.structure] + [s for s in specs if not s.structure
-                                                    and not s.computed]
-               + [s for s in specs if not s.structure and s.computed])
-    structure = None
-    for spec in ordered:
-        if spec.computed and structure is None:
-            try:
-                structure = build_structure(values)
-            except (ValueError, FileNotFoundError) as exc:
-                text = str(exc)
-                raise ConfigError(text if text.startswith(section) else
-                                  f"{section}.{text}") from None
-        if spec.name in params:
-            raw = params[spec.name]
-        else:
-            try:
-                raw = spec.default_for(structure, values)
-            except ValueError as exc:
-                raise ConfigError(f"{section}.{spec.name}: no default: {exc}") from None
-        values[spec.name] = _to_value(spec, raw, section)
-    if structure is None:
-        structure = build_structure(values)
-    return structure, values
-
-
-def _require_length(values, name, length, section):
-    if len(values[name]) != length:
-        raise ConfigError(f"{section}.{name}: needs {length} values, got {len(values[name])}")
-
-
-def _require_finite(values, name, section):
-    if not np.all(np.isfinite(values[name])):
-        raise ConfigError(f"{section}.{name}: must be finite")
-
-
-@dataclass(frozen=True, eq=False)
-class _ValidatedParams:
-    """A complete, validated parameter dict, read as attributes or items."""
-
-    params: dict = field(repr=False)
-
-    def __getattr__(self, name):
-        try:
-            return self.__dict__["params"][name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-    def __getitem__(self, name):
-        return self.params[name]
-
-
-@dataclass(frozen=True)
-class SimArm:
-    """The simulator's arm as the configuration knows it: the URDF chain and its points."""
-
-    chain: object               # models.urdf_chain.KinematicChain
-    offsets: np.ndarray         # (m, 3) feature offsets in the tip frame [m]
-
-    @property
-    def n(self):
-        return self.chain.n
-
-    @property
-    def m(self):
-        return len(self.offsets)
-
-    @property
-    def joint_names(self):
-        return self.chain.joint_names
-
-
-def build_sim_arm(values, section=SIM_SECTION, search_dirs=()):
-    """The simulator's arm (URDF chain and feature offsets) from the structure parameters."""
-    path = resolve_path(values["urdf"], search_dirs, f"{section}.urdf")
-    chain = load_chain(path, values["base_link"], values["tip_link"], section)
-    points = np.asarray(values["feature_points"], dtype=float)
-    if points.size == 0 or points.size % 3:
-        raise ValueError(f"{section}.feature_points: 3 numbers per point, got {points.size}")
-    check_feature_points(points.reshape(-1, 3), chain.n, section)
-    return SimArm(chain, points.reshape(-1, 3))
-
-
-@dataclass(frozen=True, eq=False)
-class SimConfig(_ValidatedParams):
-    """Validated parameters of the simulator (``sim_node``): the arm, its camera and timing."""
-
-    arm: SimArm = None
-    camera: PinholeCamera = None
-
-    @classmethod
-    def from_params(cls, params, section=SIM_SECTION, search_dirs=()):
-        arm, v = resolve_params(SIM_PARAMS, params, section,
-                                lambda values: build_sim_arm(values, section, search_dirs))
-        for name in ("initial_positions", "initial_velocities", "joint_names"):
-            _require_length(v, name, arm.n, section)
-        for name in ("initial_positions", "initial_velocities"):
-            _require_finite(v, name, section)
-        _require_length(v, "markers.colors", 3 * arm.m, section)
-        for name in ("faults.nan_pixels", "faults.nan_joint_states", "faults.dropout",
-                     "faults.occlusion"):
-            _require_length(v, name, 2, section)
-        ratio = v["control_period"] / v["physics_dt"]
-        if abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise ConfigError(f"{section}.control_period: must be a whole multiple of "
-                              f"physics_dt ({v['physics_dt']}), got {v['control_period']}")
-        if v["timing_mode"] not in TIMING_MODES:
-            raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
-                              f"got {v['timing_mode']!r}")
-        if v["camera_mode"] not in CAMERA_MODES:
-            raise ConfigError(f"{section}.camera_mode: must be one of {CAMERA_MODES}, "
-                              f"got {v['camera_mode']!r}")
-        if v["camera_rate"] * v["control_period"] > 1.0 + 1e-9:
-            raise ConfigError(f"{section}.camera_rate: at most one frame per control period "
-                              f"({1.0 / v['control_period']:g} Hz), got {v['camera_rate']}")
-        camera = _camera(v, "camera.", section)
-        return cls(v, arm, camera)
-
-    @property
-    def substeps(self):
-        return int(round(self.control_period / self.physics_dt))
-
-    @property
-    def image_bounds(self):
-        """[u_min, u_max, v_min, v_max] of the simulated picture in the controller's pixels."""
-        return self.camera.image_bounds
-
-
-def _camera(values, prefix, section):
-    if values[prefix + "orientation"] not in ("look_at", "rpy"):
-        raise ConfigError(f"{section}.{prefix}orientation: must be 'look_at' or 'rpy', got "
-                          f"{values[prefix + 'orientation']!r}")
-    try:
-        return PinholeCamera.from_params(values, prefix, section)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-
-
-def _check_image_bounds(v, section):
-    _require_length(v, "image_bounds", 4, section)
-    u0, u1, v0, v1 = v["image_bounds"]
-    if not (u0 < u1 and v0 < v1):
-        raise ConfigError(f"{section}.image_bounds: needs u_min < u_max and v_min < v_max, "
-                          f"got {v['image_bounds'].tolist()}")
-
 
 def build_controller_model(values, section=CONTROLLER_SECTION, search_dirs=(), model=None):
     """The controller's model from the structure parameters (``model`` reused if unchanged)."""
@@ -592,7 +193,7 @@ def _structure_key(values):
 
 
 @dataclass(frozen=True, eq=False)
-class ControllerConfig(_ValidatedParams):
+class ControllerConfig(ValidatedParams):
     """Validated parameters of the controller (``controller_node``), its model and x_d."""
 
     model: RobotCameraModel = None
@@ -619,14 +220,14 @@ class ControllerConfig(_ValidatedParams):
                    "projection.a_z_max": model.p_z, "projection.a_d_min": model.p_d,
                    "projection.a_d_max": model.p_d, "torque_limit": model.n}
         for name, length in lengths.items():
-            _require_length(v, name, length, section)
-        _require_length(v, "joint_names", model.n, section)
+            require_length(v, name, length, section)
+        require_length(v, "joint_names", model.n, section)
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
                               f"got {v['timing_mode']!r}")
         for name in ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z", "a_z_perp_init", "a_z_init",
                      "a_d_init", "trajectory.offset", "trajectory.a_cos", "trajectory.a_sin"):
-            _require_finite(v, name, section)
+            require_finite(v, name, section)
         for name in ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z"):
             if np.any(v[name] <= 0.0):
                 raise ConfigError(f"{section}.{name}: every entry must be > 0 "
@@ -638,7 +239,7 @@ class ControllerConfig(_ValidatedParams):
             raise ConfigError(f"{section}.torque_limit: every entry must be > 0, "
                               f"got {list(v['torque_limit'])}")
         check_alpha_gamma(v["alpha"], v["gamma"], section)
-        _check_image_bounds(v, section)
+        check_image_bounds(v, section)
         if v["safety.fallback"] not in FALLBACKS:
             raise ConfigError(f"{section}.safety.fallback: must be one of {FALLBACKS}, "
                               f"got {v['safety.fallback']!r}")
@@ -677,171 +278,3 @@ def _trajectory(v, m, section, search_dirs):
                               f"{section}.trajectory.file: {text}") from None
     raise ConfigError(f"{section}.trajectory.type: must be one of {list(TRAJECTORY_TYPES)}, "
                       f"got {kind!r}")
-
-
-def check_alpha_gamma(alpha, gamma, section=CONTROLLER_SECTION):
-    """Theorem 1 needs alpha > gamma / 3; refuse anything else."""
-    if not alpha > gamma / 3.0:
-        raise ConfigError(f"{section}.alpha: Theorem 1 requires alpha > gamma/3, got "
-                          f"alpha={alpha} and gamma={gamma} (gamma/3={gamma / 3.0:.6g})")
-
-
-def flatten(mapping, prefix=""):
-    """Flatten nested mappings to dotted names, as ROS 2 does with parameter files."""
-    flat = {}
-    for key, value in mapping.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            flat.update(flatten(value, name + "."))
-        else:
-            flat[name] = value
-    return flat
-
-
-def _coerce_numbers(value):
-    """Read '1e9' as a number like ROS 2's parameter parser does (YAML 1.1 keeps it a string)."""
-    if isinstance(value, list):
-        return [_coerce_numbers(v) for v in value]
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
-
-
-def read_param_file(path):
-    """Read a ROS 2 parameter YAML into {section: flat params}.
-
-    ``sim_node`` and ``controller_node`` are required; a ``feature_detector``
-    section (the detector of ``camera_mode: rendered``) is read when present.
-    """
-    with open(path, encoding="utf-8") as handle:
-        try:
-            data = yaml.safe_load(handle)
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: must be a mapping with sim_node and controller_node")
-    sections = {}
-    for section in (SIM_SECTION, CONTROLLER_SECTION, DETECTOR_SECTION):
-        body = data.get(section) or data.get("/" + section)
-        if body is None and section == DETECTOR_SECTION:
-            continue
-        if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
-            raise ConfigError(f"{path}: needs a '{section}: ros__parameters:' mapping")
-        sections[section] = {k: _coerce_numbers(v)
-                             for k, v in flatten(body["ros__parameters"]).items()}
-    return sections
-
-
-def apply_overrides(sections, overrides):
-    """Apply ``section.param=value`` strings (values parsed as YAML); returns a new dict."""
-    result = {name: dict(body) for name, body in sections.items()}
-    for item in overrides:
-        key, sep, text = item.partition("=")
-        section, dot, name = key.partition(".")
-        if section == DETECTOR_SECTION:
-            result.setdefault(section, {})
-        if not sep or not dot or section not in result:
-            raise ConfigError(f"--set {item!r}: expected sim_node.NAME=VALUE, "
-                              f"controller_node.NAME=VALUE or feature_detector.NAME=VALUE")
-        try:
-            result[section][name] = _coerce_numbers(yaml.safe_load(text))
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"--set {item!r}: value is not valid YAML: {exc}") from None
-    return result
-
-
-@dataclass(frozen=True, eq=False)
-class Scenario:
-    """A validated simulator + controller configuration."""
-
-    sim: SimConfig
-    controller: ControllerConfig
-    detector: object = None     # detection.DetectorConfig when the camera renders
-
-
-def detector_for(sim, params=None):
-    """The feature detector matching the simulated camera: its marker colours and pixel map.
-
-    ``params`` (a ``feature_detector`` section) may change anything, e.g. the tolerance.
-    """
-    from .detection import DetectorConfig
-
-    base = {"markers.colors": [float(v) for v in sim["markers.colors"]],
-            "pixel_origin": [float(v) for v in sim.camera.pixel_origin],
-            "pixel_axes": [float(v) for v in sim.camera.pixel_axes]}
-    base.update(params or {})
-    return DetectorConfig.from_params(base)
-
-
-def load_scenario(path, overrides=(), edit: Callable[[dict], None] | None = None):
-    """Read, override and validate a parameter file; both sections or nothing.
-
-    File names inside (URDFs, trajectory tables) may be relative to the file's
-    folder.  The controller's model gets the simulator's camera and arm as its
-    ground truth, and the start is checked: every feature point in front of the
-    camera and inside both the picture and the controller's ``image_bounds``,
-    the true and the estimated image Jacobian of full row rank (Assumption 2).
-    """
-    sections = apply_overrides(read_param_file(path), overrides)
-    if edit is not None:
-        edit(sections)
-    search_dirs = (os.path.dirname(os.path.abspath(path)),)
-    sim = SimConfig.from_params(sections[SIM_SECTION], search_dirs=search_dirs)
-    ctrl = ControllerConfig.from_params(sections[CONTROLLER_SECTION], search_dirs=search_dirs)
-    model = ctrl.model
-    if (model.n, model.m) != (sim.arm.n, sim.arm.m):
-        raise ConfigError(f"controller_node.model: describes {model.n} joints and {model.m} "
-                          f"point(s); the simulated arm (sim_node.urdf, feature_points) has "
-                          f"{sim.arm.n} and {sim.arm.m}")
-    if tuple(ctrl.joint_names) != tuple(sim.joint_names):
-        raise ConfigError(f"controller_node.joint_names: must equal sim_node.joint_names "
-                          f"{list(sim.joint_names)}, got {list(ctrl.joint_names)}")
-    try:
-        model.set_ground_truth(sim.camera.projection_matrix, sim.arm.chain, sim.arm.offsets)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-    check_start(sim, ctrl)
-    detector = (detector_for(sim, sections.get(DETECTOR_SECTION))
-                if sim.camera_mode == "rendered" else None)
-    return Scenario(sim, ctrl, detector)
-
-
-def check_start(sim, ctrl):
-    """The start-up checks of :func:`load_scenario` (ConfigError naming what fails)."""
-    q0 = np.asarray(sim.initial_positions, dtype=float)
-    points = sim.arm.chain.points(q0, sim.arm.offsets)
-    root = sim.arm.chain.root_to_base
-    pixels, depth = sim.camera.project(points @ root[:3, :3].T + root[:3, 3])
-    behind = [i + 1 for i, z in enumerate(depth.tolist()) if not z > 0.0]
-    if behind:
-        raise ConfigError(f"sim_node.initial_positions: feature point(s) {behind} behind the "
-                          f"camera at the start (depths {np.round(depth, 3).tolist()} m); move "
-                          f"sim_node.camera or the start pose")
-    for section, bounds in ((SIM_SECTION + ".camera", sim.image_bounds),
-                            (CONTROLLER_SECTION + ".image_bounds", ctrl.image_bounds)):
-        u0, u1, v0, v1 = bounds
-        outside = [i + 1 for i, (u, v) in enumerate(pixels.reshape(-1, 2).tolist())
-                   if not (u0 <= u <= u1 and v0 <= v <= v1)]
-        if outside:
-            raise ConfigError(f"sim_node.initial_positions: feature point(s) {outside} outside "
-                              f"the image at the start (pixels {np.round(pixels, 1).tolist()}, "
-                              f"{section} {[float(b) for b in bounds]})")
-    model = ctrl.model
-    tensors = model.kinematic_tensors(q0, np.zeros(model.n))
-    _, dH, _, W, _ = tensors
-    for what, a_perp, a_z in (("true", model.a_z_perp, model.a_z),
-                              ("estimated", ctrl.a_z_perp_init, ctrl.a_z_init)):
-        J = model.image_jacobian(W, dH, pixels, np.asarray(a_perp), np.asarray(a_z))
-        sv = np.linalg.svd(J, compute_uv=False)
-        if sv[-1] <= 1e-9 * max(sv[0], 1e-300):
-            hint = ("the initial estimates (controller_node.a_z_perp_init/a_z_init or "
-                    "initial_estimate.*)" if what == "estimated" else
-                    "the camera and the points (sim_node.camera, feature_points)")
-            raise ConfigError(f"sim_node.initial_positions: the {what} image Jacobian J(q, x) "
-                              f"at the start has rank {int(np.sum(sv > 1e-9 * sv[0]))} < "
-                              f"{2 * model.m} (singular values {np.round(sv, 6).tolist()}): "
-                              f"Assumption 2 of the paper fails here; change the start pose or "
-                              f"{hint}")

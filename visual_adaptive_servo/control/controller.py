@@ -36,11 +36,18 @@ from math import isfinite, sqrt
 
 import numpy as np
 
-from .config import ControllerConfig, check_alpha_gamma
+from ..schema import CONTROLLER_SECTION, ConfigError
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
+
+
+def check_alpha_gamma(alpha, gamma, section=CONTROLLER_SECTION):
+    """Theorem 1 needs alpha > gamma / 3; refuse anything else."""
+    if not alpha > gamma / 3.0:
+        raise ConfigError(f"{section}.alpha: Theorem 1 requires alpha > gamma/3, got "
+                          f"alpha={alpha} and gamma={gamma} (gamma/3={gamma / 3.0:.6g})")
 
 
 @dataclass(frozen=True)
@@ -442,7 +449,7 @@ class AdaptiveVisualTracker:
     #: the baselines have no model-based predictor and take frames as current
     compensates_latency = True
 
-    def __init__(self, config: ControllerConfig):
+    def __init__(self, config):
         self.config = config
         self.model = config.model
         self.trajectory = config.trajectory

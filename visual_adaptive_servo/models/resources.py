@@ -36,10 +36,11 @@ from __future__ import annotations
 import os
 
 PACKAGE = "visual_adaptive_servo"
-_PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# where this package's shared files live in a checkout / pip install, by share subfolder
-_OWN_SHARE = {"urdf": os.path.join(_PACKAGE_ROOT, "sim_bridge", "urdf"),
-              "config": os.path.join(_PACKAGE_ROOT, "config")}
+#: the folder that holds the visual_adaptive_servo and sim_bridge packages (a checkout)
+PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+#: where this package's shared files live in a checkout / pip install, by share subfolder
+OWN_SHARE = {"urdf": os.path.join(PACKAGE_PARENT, "sim_bridge", "urdf"),
+             "config": os.path.join(PACKAGE_PARENT, "config")}
 
 
 def resolve_path(name, search_dirs=(), what="file"):
@@ -80,6 +81,6 @@ def _package_candidates(package, rest):
             pass
     if package == PACKAGE:
         folder, _, inner = rest.partition("/")
-        if folder in _OWN_SHARE:
-            candidates.append(os.path.join(_OWN_SHARE[folder], inner))
+        if folder in OWN_SHARE:
+            candidates.append(os.path.join(OWN_SHARE[folder], inner))
     return candidates

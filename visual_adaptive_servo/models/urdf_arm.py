@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..resources import resolve_path
 from .base import GRAVITY, RobotCameraModel
 from .kinematic_regressor import KinematicRegressor
+from .resources import resolve_path
 from .urdf_chain import load_chain
 
 #: smallest triangle area / longest side (m) that counts as non-collinear
@@ -69,7 +69,7 @@ class UrdfArmCamera(RobotCameraModel):
     ----------
     urdf : str
         File name (``package://`` and ``pybullet_data://`` accepted, see
-        :func:`~visual_adaptive_servo.resources.resolve_path`).
+        :func:`~visual_adaptive_servo.models.resources.resolve_path`).
     base_link, tip_link : str
         The chain's ends; its revolute and prismatic joints are the controlled joints.
     feature_points : sequence of float

@@ -50,7 +50,7 @@ import numpy as np
 import yaml
 
 from . import messages as m
-from .controller import health
+from ..control.controller import health
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@
 
 """``controller_node``: H. Wang's adaptive visual tracker as a ROS 2 node.
 
-Thin: it declares the parameters of :data:`config.CONTROLLER_PARAMS`, turns
-messages into arrays and back (:mod:`.messages`) and calls
-:class:`controller.AdaptiveVisualTracker`.
+Thin: it declares the parameters of :data:`config.controller.CONTROLLER_PARAMS`, turns
+messages into arrays and back (:mod:`recording.messages`) and calls
+:class:`control.controller.AdaptiveVisualTracker`.
 
 Topics (DESIGN.md section 2)
 ----------------------------
@@ -65,17 +65,12 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
-from . import messages as m
-from .config import (
-    CONTROLLER_PARAMS,
-    CONTROLLER_SECTION,
-    ConfigError,
-    ControllerConfig,
-    build_controller_model,
-)
-from .controller import AdaptiveVisualTracker, frame_values, health
-from .ros_main import run_node
-from .ros_params import declare_schema, runtime_changes
+from ..config.controller import build_controller_model, CONTROLLER_PARAMS, ControllerConfig
+from ..control.controller import AdaptiveVisualTracker, frame_values, health
+from ..recording import messages as m
+from ..schema import CONTROLLER_SECTION, ConfigError
+from .main import run_node
+from .params import declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes

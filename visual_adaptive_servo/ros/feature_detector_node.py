@@ -14,10 +14,10 @@
 
 """``feature_detector``: coloured markers in a camera image -> the controller's pixels.
 
-Thin: it declares the parameters of :data:`config.DETECTOR_PARAMS`, turns the
-image into an array (:func:`messages.image_from_msg`) and calls
-:func:`detection.detect`; the pixel convention (``pixel_origin``,
-``pixel_axes``) is documented in :mod:`.detection`.
+Thin: it declares the parameters of :data:`config.detector.DETECTOR_PARAMS`, turns the
+image into an array (:func:`recording.messages.image_from_msg`) and calls
+:func:`vision.detection.detect`; the pixel convention (``pixel_origin``,
+``pixel_axes``) is documented in :mod:`vision.detection`.
 
 Topics (DESIGN.md section 2)
 ----------------------------
@@ -56,7 +56,7 @@ costs the simulator no wait.
 Runtime parameters: ``markers.colors`` (the number of markers cannot change),
 ``markers.tolerance`` and ``blob_area`` can be set while running, for tuning
 against the live overlay; the new set is validated whole by
-:meth:`DetectorConfig.from_params` before it is applied.
+:func:`config.detector.detector_config` before it is applied.
 """
 
 from __future__ import annotations
@@ -68,12 +68,13 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
-from . import messages as m
-from .config import DETECTOR_PARAMS, DETECTOR_SECTION, ConfigError
-from .detection import DetectorConfig, detect, image_points
-from .overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
-from .ros_main import run_node
-from .ros_params import declare_schema, runtime_changes
+from ..config.detector import DETECTOR_PARAMS, detector_config
+from ..recording import messages as m
+from ..schema import ConfigError, DETECTOR_SECTION
+from ..vision.detection import detect, image_points
+from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
+from .main import run_node
+from .params import declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of wall time between two /diagnostics when the level stays
@@ -86,7 +87,7 @@ class FeatureDetectorNode(Node):
         super().__init__(DETECTOR_SECTION, **kwargs)
         self.specs = {spec.name: spec for spec in DETECTOR_PARAMS}
         self.params = declare_schema(self, DETECTOR_PARAMS, DETECTOR_SECTION)
-        self.config = DetectorConfig.from_params(self.params)
+        self.config = detector_config(self.params)
         self.msgs = msgs = m.rclpy_messages()
 
         self.lockstep = self.params["timing_mode"] == "lockstep"
@@ -174,7 +175,7 @@ class FeatureDetectorNode(Node):
             return SetParametersResult(successful=True)
         params = dict(self.params, **changes)
         try:
-            config = DetectorConfig.from_params(params)
+            config = detector_config(params)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         if config.m != self.config.m:

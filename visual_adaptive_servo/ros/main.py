@@ -43,7 +43,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from .config import ConfigError
+from ..schema import ConfigError
 
 SPIN_TIMEOUT = 0.1    # s of wall time: the longest a stop request waits for the executor
 

@@ -12,9 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Declaring a parameter schema (:class:`config.ParamSpec`) on an rclpy node.
+"""Declaring a parameter schema (:class:`visual_adaptive_servo.schema.ParamSpec`) on a node.
 
-Used by both nodes.  The structure parameters (``model``, ``urdf``,
+Used by the three nodes.  The structure parameters (``model``, ``urdf``,
 ``feature_points``, ...) are declared first, because the defaults of the
 others (list lengths, initial estimates) depend on the model they define;
 parameters with computed defaults come last, after the ones they read.  Every parameter gets a
@@ -36,7 +36,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.exceptions import ParameterException
 
-from .config import ConfigError
+from ..schema import ConfigError
 
 PARAMETER_TYPES = {
     "float": ParameterType.PARAMETER_DOUBLE,

@@ -14,8 +14,8 @@
 
 """``sim_node``: the PyBullet arm and fixed camera as a ROS 2 node.
 
-Thin: it declares the parameters of :data:`config.SIM_PARAMS`, owns a
-:class:`simulator.Simulator` and turns its measurements into messages.
+Thin: it declares the parameters of :data:`config.sim.SIM_PARAMS`, owns a
+:class:`sim_bridge.simulator.Simulator` and turns its measurements into messages.
 
 Topics (DESIGN.md section 2)
 ----------------------------
@@ -44,7 +44,7 @@ Timing (``timing_mode``)
 The simulation starts once a controller is connected (it publishes the command
 and subscribes /joint_states and the frame topic; in rendered mode a detector
 too), with ``start.wait_for_recorder`` also once a recorder subscribes every
-topic of :data:`visual_adaptive_servo.recording.TOPICS` (and /joint_states,
+topic of :data:`visual_adaptive_servo.recording.recorder.TOPICS` (and /joint_states,
 /clock and /camera/features have two subscribers), then after ``START_SETTLE``
 more, so the other processes have matched each other too: the arm does not
 fall meanwhile and the recording misses no period.  (A recorder with ``--use-sim-time``
@@ -84,7 +84,7 @@ camera topics, ~/image) are sensor data (best effort, depth 5) and the rest is
 reliable.
 
 ``duration`` > 0: after that much simulated time the node stops stepping and
-exits with status 0.  SIGINT/SIGTERM stop it cleanly (:mod:`.ros_main`).
+exits with status 0.  SIGINT/SIGTERM stop it cleanly (:mod:`.main`).
 """
 
 from __future__ import annotations
@@ -99,21 +99,16 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 
-from visual_adaptive_servo import messages as m
-from visual_adaptive_servo.config import (
-    SIM_PARAMS,
-    SIM_SECTION,
-    ConfigError,
-    SimConfig,
-    build_sim_arm,
-)
-from visual_adaptive_servo.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
-from visual_adaptive_servo.recording import TOPICS
-from visual_adaptive_servo.ros_main import run_node
-from visual_adaptive_servo.ros_params import declare_schema
+from sim_bridge import render
+from sim_bridge.simulator import Simulator
 
-from . import render
-from .simulator import Simulator
+from ..config.sim import build_sim_arm, SIM_PARAMS, SimConfig
+from ..recording import messages as m
+from ..recording.recorder import TOPICS
+from ..schema import ConfigError, SIM_SECTION
+from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
+from .main import run_node
+from .params import declare_schema
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_TOPIC = "/effort_controller/commands"

@@ -80,7 +80,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .config import DETECTOR_PARAMS, DETECTOR_SECTION, TIMING_MODES, ConfigError, resolve_params
+from ..schema import ConfigError, DETECTOR_SECTION
 
 MAX_MARKERS = 3
 EDGE_MARGIN = 3        # px around a blob where partly covered pixels are weighted
@@ -192,21 +192,6 @@ class DetectorConfig:
     def m(self):
         """Number of markers (feature points)."""
         return len(self.colors)
-
-    @classmethod
-    def from_params(cls, params):
-        """Config from the flat ``feature_detector`` parameters (:data:`DETECTOR_PARAMS`).
-
-        Checks the node's own parameters too (``timing_mode``), so that a bad
-        parameter set is refused in one place.
-        """
-        # no structure parameter: every default is a plain value
-        _, v = resolve_params(DETECTOR_PARAMS, params, DETECTOR_SECTION, lambda values: None)
-        if v["timing_mode"] not in TIMING_MODES:
-            raise ConfigError(f"{DETECTOR_SECTION}.timing_mode: must be one of {TIMING_MODES}, "
-                              f"got {v['timing_mode']!r}")
-        return cls(v["markers.colors"], v["markers.tolerance"], v["blob_area"],
-                   v["pixel_origin"], v["pixel_axes"])
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,123 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The figures of a run, as summary.json holds them (numpy only).
+
+:func:`summarize` is what ``vas run`` writes; campaigns read the same figures
+back (``campaigns.engine.FIGURES``), and ``vas compare`` judges controllers by
+:func:`run_figures`, over the window after the transient (t >= 5 s):
+
+* RMS and max of the true image error, max_i |x_true,i - x_d,i| [px], from the
+  noiseless pixels: the tracking itself, not the measurement noise;
+* torque RMS, sqrt(mean |tau|^2) [N m];
+* torque-rate RMS, sqrt(mean |(tau_k - tau_k-1) / T|^2) [N m/s]: the chatter.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+RMS_WINDOW_S = 5.0      # final_rms_*: over the last 5 s of the run
+TRANSIENT_S = 5.0       # transient_* and torque figures: over t >= 5 s
+
+
+def camera_figures(frames, feature_camera):
+    """Frame counts and ages for summary.json: what the camera sent, what the controller used.
+
+    ``frames_dropped`` counts published frames the controller did not apply (refused:
+    invalid, out of order, too old); ``frame_age`` is the time from capture to use.
+    """
+    figures = {"frames_captured": feature_camera.captured,
+               "frames_published": feature_camera.published}
+    if frames is not None:
+        applied = frames["applied"]
+        figures.update(frames_applied=applied, frames_late=frames["late"],
+                       frames_dropped=frames["received"] - applied,
+                       frame_age_mean_s=frames["age_sum"] / applied if applied else math.nan,
+                       frame_age_max_s=frames["age_max"] if applied else math.nan)
+    return figures
+
+
+def summarize(data, status, wall, diverged, reason, counters, period):
+    """summary.json's figures of a run's samples ``data``.
+
+    The transient_* and torque ones are over t >= 5 s (:func:`run_figures`).
+    """
+    t = data["t"]
+    late = run_figures(t, data["x_true"], data["x_d"], data["tau"], period)
+    transient = {"transient_rms_true_error_px": late["rms_error_px"],
+                 "transient_max_true_error_px": late["max_error_px"],
+                 "torque_rms": late["torque_rms"], "torque_rate_rms": late["torque_rate_rms"]}
+    if len(t) == 0:
+        return {"diverged": diverged, "divergence_reason": reason, "final_rms_error_px": math.nan,
+                "max_error_px": math.nan, "max_abs_torque": math.nan,
+                "final_depth_error": math.nan, "sim_time_s": 0.0, "wall_time_s": wall,
+                "realtime_factor": 0.0, **transient, **counters}
+    window = t >= t[-1] - RMS_WINDOW_S + 1e-9
+    sim_time = float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0))
+    rms, peak = error_figures(data["x"], data["x_d"], window)
+    rms_true, peak_true = error_figures(data["x_true"], data["x_d"], window)
+    depth_err = data["z_hat"][-1] - data["z"][-1]
+    return {
+        "diverged": diverged,
+        "divergence_reason": reason,
+        "final_rms_error_px": rms,
+        "max_error_px": peak,
+        "final_rms_true_error_px": rms_true,
+        "max_true_error_px": peak_true,
+        "max_abs_torque": float(np.nanmax(np.abs(data["tau"]))),
+        "final_depth_error": float(depth_err[0]) if depth_err.size == 1 else depth_err.tolist(),
+        "min_estimated_depth": float(np.nanmin(data["z_hat"])),
+        "sim_time_s": sim_time,
+        "wall_time_s": wall,
+        "realtime_factor": sim_time / wall if wall > 0 else math.inf,
+        **transient,
+        **counters,
+    }
+
+
+def point_error(x, x_d):
+    """Per-sample largest point error max_i |x_i - x_d,i| [px] of (N, 2m) arrays -> (N,)."""
+    return np.linalg.norm((x - x_d).reshape(len(x), -1, 2), axis=2).max(axis=1)
+
+
+def error_figures(x, x_d, window):
+    """(RMS over ``window``, max) of :func:`point_error`, leaving out NaN samples."""
+    err = point_error(x, x_d)
+    valid = np.isfinite(err)
+    rms = float(np.sqrt(np.mean(err[window & valid] ** 2))) if np.any(window & valid) else math.nan
+    return rms, (float(np.max(err[valid])) if valid.any() else math.nan)
+
+
+def run_figures(t, x_true, x_d, tau, period, transient=TRANSIENT_S):
+    """``vas compare``'s figures of one run over t >= ``transient`` (module docstring)."""
+    nan = math.nan
+    err = point_error(x_true, x_d)
+    window = (t >= transient - 1e-9) & np.isfinite(err)
+    figures = {"rms_error_px": nan, "max_error_px": nan, "torque_rms": nan,
+               "torque_rate_rms": nan, "window_s": 0.0}
+    if not window.any():
+        return figures
+    rate = np.diff(tau, axis=0) / period
+    rate_window = window[1:] & window[:-1]
+    figures.update(
+        rms_error_px=float(np.sqrt(np.mean(err[window] ** 2))),
+        max_error_px=float(np.max(err[window])),
+        torque_rms=float(np.sqrt(np.mean(np.sum(tau[window] ** 2, axis=1)))),
+        torque_rate_rms=(float(np.sqrt(np.mean(np.sum(rate[rate_window] ** 2, axis=1))))
+                         if rate_window.any() else nan),
+        window_s=float(np.count_nonzero(window) * period))
+    return figures
