@@ -91,4 +91,4 @@ def test_contract_breaks_on_a_planted_import(package_copy, module, code, contrac
     status, output = lint_imports(str(package_copy))
     assert status != 0, output
     broken = output[output.index("Broken contracts"):]
-    assert f"{contract}" in broken and evidence in broken, output
+    assert contract in broken and evidence in broken, output

@@ -164,11 +164,13 @@ def resolve_params(specs, params, section, build_structure):
 
 
 def require_length(values, name, length, section):
+    """``values[name]`` has ``length`` entries (ConfigError naming it otherwise)."""
     if len(values[name]) != length:
         raise ConfigError(f"{section}.{name}: needs {length} values, got {len(values[name])}")
 
 
 def require_finite(values, name, section):
+    """Every entry of ``values[name]`` is finite (ConfigError naming it otherwise)."""
     if not np.all(np.isfinite(values[name])):
         raise ConfigError(f"{section}.{name}: must be finite")
 
