@@ -30,13 +30,12 @@ from sim_bridge.camera import PinholeCamera
 
 from ..control.controller import check_alpha_gamma
 from ..control.trajectory import SinusoidTrajectory, TabulatedTrajectory, TRAJECTORY_TYPES
-from ..models import make_model, MODEL_NAMES, RobotCameraModel
+from ..models import make_model, MODEL_NAMES, RobotCameraModel, STRUCTURE_PARAMS
 from ..models.resources import resolve_path
 from ..schema import (CONTROLLER_SECTION, ConfigError, INF, ParamSpec, require_finite,
                       require_length, resolve_params, TIMING_MODES, ValidatedParams)
 from .common import camera_specs, check_image_bounds, structure_specs
 
-STRUCTURE_NAMES = ("model", "urdf", "base_link", "tip_link", "feature_points", "unknown_lengths")
 FALLBACKS = ("gravity_compensation", "zero_torque")
 
 
@@ -189,7 +188,7 @@ def build_controller_model(values, section=CONTROLLER_SECTION, search_dirs=(), m
 
 def _structure_key(values):
     return tuple((k, tuple(v) if isinstance(v, (tuple, np.ndarray)) else v)
-                 for k, v in sorted(values.items()) if k in STRUCTURE_NAMES)
+                 for k, v in sorted(values.items()) if k in STRUCTURE_PARAMS)
 
 
 @dataclass(frozen=True, eq=False)
