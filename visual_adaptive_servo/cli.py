@@ -65,7 +65,8 @@ def cmd_run(args):
     scenario = load_scenario(args.config, _run_overrides(args))
     summary = run_scenario(scenario, args.out, duration=args.duration, progress=args.progress,
                            record=not args.no_bag,
-                           controller_factory=controller_factory(args.controller))
+                           controller_factory=controller_factory(args.controller),
+                           announce=print)
     print(json.dumps({k: summary[k] for k in (
         "diverged", "final_rms_error_px", "max_error_px", "final_rms_true_error_px",
         "max_abs_torque", "final_depth_error", "sim_time_s", "wall_time_s", "realtime_factor")},
