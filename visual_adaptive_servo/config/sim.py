@@ -23,6 +23,7 @@ import numpy as np
 from ..models.resources import resolve_path
 from ..models.urdf_arm import check_feature_points
 from ..models.urdf_chain import load_chain
+from ..models.urdf_checks import check_urdf
 from ..schema import (ConfigError, ParamSpec, require_finite, require_length, resolve_params,
                       SIM_SECTION, TIMING_MODES, ValidatedParams)
 from .common import build_camera, camera_specs, MARKER_COLORS, PAPER_URDF, structure_specs
@@ -122,6 +123,7 @@ def build_sim_arm(values, section=SIM_SECTION, search_dirs=()):
     """The simulator's arm (URDF chain and feature offsets) from the structure parameters."""
     path = resolve_path(values["urdf"], search_dirs, f"{section}.urdf")
     chain = load_chain(path, values["base_link"], values["tip_link"], section)
+    check_urdf(path, chain.joint_names, section, simulator=True)
     points = np.asarray(values["feature_points"], dtype=float)
     if points.size == 0 or points.size % 3:
         raise ValueError(f"{section}.feature_points: 3 numbers per point, got {points.size}")
