@@ -98,9 +98,6 @@ def space_of(folder, text, base):
     ("controller_node.latency_compensation: {choices: [true, 3]}",
      r"with 3 the configuration is refused: controller_node.latency_compensation: must be "
      r"true or false"),
-    ("controller_node.Gamma_d_normalized: {low: 1.0, high: 10.0}",
-     r"Gamma_d_normalized: only sets the default of Gamma_d, which the configuration gives "
-     r"explicitly"),
     ("[1, 2]", r"must be a mapping of controller_node.NAME"),
 ])
 def test_space_outside_the_parameters_rules_is_refused(tmp_path, paper, text, match):
@@ -116,15 +113,32 @@ def test_space_scale_ends_are_checked_element_wise_against_the_spec(tmp_path, pa
         space_of(tmp_path, "scale.controller_node.max_dt: {low: 0.5, high: 1000.0}", paper)
 
 
-def test_default_space_drops_a_shadowed_dimension_only_where_the_file_shadows_it(paper):
+def test_default_space_tunes_gamma_d_through_what_the_file_uses(paper):
     scenario, file_params = paper
     space = load_space(DEFAULT_SPACE, scenario, file_params, drop_shadowed=True)
+    # the paper's file lists Gamma_d: it is scaled, Gamma_d_normalized (its default) left out
     assert [key for key, _ in space.dropped] == ["controller_node.Gamma_d_normalized"]
     assert space.dimensions[0].param == "gamma" and space.dimensions[1].param == "alpha"
+    assert "scale.controller_node.Gamma_d" in [d.key for d in space.dimensions]
+    # the iiwa's takes Gamma_d from Gamma_d_normalized: that is tuned
     iiwa = load_scenario(IIWA)
     iiwa_space = load_space(DEFAULT_SPACE, iiwa, read_param_file(IIWA)["controller_node"])
-    assert iiwa_space.dropped == ()
+    assert [key for key, _ in iiwa_space.dropped] == ["scale.controller_node.Gamma_d"]
     assert iiwa_space.by_param("Gamma_d_normalized") is not None
+
+
+def test_a_dimension_the_file_makes_ineffective_is_refused_or_dropped(tmp_path, paper):
+    text = ("controller_node.alpha: {low: 11.0, high: 20.0}\n"
+            "controller_node.Gamma_d_normalized: {low: 1.0, high: 10.0}\n")
+    with pytest.raises(SpaceError, match=r"Gamma_d_normalized: only sets the default of "
+                                         r"Gamma_d, which the configuration gives explicitly"):
+        space_of(tmp_path, text, paper)
+    space = load_space(write(tmp_path, "s.yaml", text), *paper, drop_shadowed=True)
+    assert [d.key for d in space.dimensions] == ["controller_node.alpha"]
+    with pytest.raises(SpaceError, match=r"alpha.when_file_sets: must name a parameter of "
+                                         r"controller_node, got 'nope'"):
+        space_of(tmp_path, "controller_node.alpha: {low: 11.0, high: 20.0, when_file_sets: nope}",
+                 paper)
 
 
 def test_every_draw_keeps_theorem_1_and_its_ranges(tmp_path, paper):

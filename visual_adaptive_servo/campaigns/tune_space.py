@@ -25,6 +25,10 @@ A space file is a YAML mapping of dimension -> range (the shipped default is
 ``scale.controller_node.NAME`` multiplies the configuration's value (a number or a
 list, e.g. a diagonal gain) -- the ``set.``/``scale.`` factors of a campaign spec
 (:mod:`.spec`), which realise them.  ``choices`` lists the values of an option.
+``when_file_sets: NAME`` / ``unless_file_sets: NAME`` keep a dimension only for a
+configuration file that gives (does not give) ``controller_node.NAME`` itself: the
+default space tunes ``Gamma_d_normalized`` where Gamma_d comes from it, and scales
+Gamma_d where the file lists Gamma_d.
 
 Everything is checked against the controller's parameter specs
 (:data:`~visual_adaptive_servo.config.controller.CONTROLLER_PARAMS`) before any run:
@@ -58,6 +62,7 @@ CONDITION_PARAMS = ("a_z_perp_init", "a_z_init", "a_d_init")
 THEOREM_MARGIN = 1e-6
 _SPECS = {s.name: s for s in CONTROLLER_PARAMS}
 _RANGE_KEYS = {"low", "high", "log"}
+_CONDITION_KEYS = ("when_file_sets", "unless_file_sets")
 
 
 class SpaceError(ConfigError):
@@ -202,11 +207,28 @@ def _parse_key(path, key):
     return mode, param, spec
 
 
+def _file_condition(path, key, body, file_params):
+    """Why the dimension does not apply to this file ('' when it does)."""
+    for condition in _CONDITION_KEYS:
+        name = body.get(condition)
+        if name is None:
+            continue
+        if not isinstance(name, str) or name not in _SPECS:
+            _fail(path, f"{key}.{condition}", f"must name a parameter of {CONTROLLER_SECTION}, "
+                                              f"got {name!r}")
+        given = name in file_params
+        if given != (condition == "when_file_sets"):
+            return (f"the file {'sets' if given else 'does not set'} {CONTROLLER_SECTION}."
+                    f"{name} ({condition})")
+    return ""
+
+
 def _parse_dimension(path, key, body):
     mode, param, spec = _parse_key(path, key)
     if not isinstance(body, dict) or not body:
         _fail(path, key, f"must be {{low: L, high: H, log: true|false}} or {{choices: [...]}}, "
                          f"got {body!r}")
+    body = {k: v for k, v in body.items() if k not in _CONDITION_KEYS}
     if "choices" in body:
         if set(body) != {"choices"}:
             _fail(path, key, "choices takes no other key")
@@ -219,7 +241,8 @@ def _parse_dimension(path, key, body):
         return Dimension(key, mode, param, choices=tuple(choices))
     unknown = sorted(set(map(str, body)) - _RANGE_KEYS)
     if unknown:
-        _fail(path, key, f"unknown key {unknown[0]!r} (keys: low, high, log; or choices)")
+        _fail(path, key, f"unknown key {unknown[0]!r} (keys: low, high, log; or choices; "
+                         "when_file_sets, unless_file_sets)")
     low, high, log = body.get("low"), body.get("high"), body.get("log", False)
     if not (_is_number(low) and _is_number(high)) or not low < high:
         _fail(path, key, f"needs numbers low < high, got low={low!r}, high={high!r}")
@@ -351,15 +374,18 @@ def load_space(path, scenario, file_params, drop_shadowed=False):
     base_values = scenario.controller.params
     model = scenario.controller.model
     search_dirs = scenario.controller.search_dirs
-    dims, targets = {}, {}
+    dims, targets, dropped = {}, {}, []
     for key, body in raw.items():
         d = _parse_dimension(path, str(key), body)
+        skip = _file_condition(path, d.key, body, file_params)
+        if skip:
+            dropped.append((d.key, skip))
+            continue
         if d.param in targets:
             _fail(path, d.key, f"{d.target} is also tuned by {targets[d.param]}")
         targets[d.param] = d.key
         dims[d.param] = d
     _check_theorem(path, dims, base_values)
-    dropped = []
     for d in list(dims.values()):
         if not d.choices:
             _check_ends(path, d, base_values)
