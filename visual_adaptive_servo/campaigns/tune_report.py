@@ -282,6 +282,7 @@ def plot_tuning(trials, space, optuna, out_dir):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     done = [t for t in trials if t.state in (optuna.trial.TrialState.COMPLETE,
                                              optuna.trial.TrialState.PRUNED)]
@@ -337,6 +338,9 @@ def plot_tuning(trials, space, optuna, out_dir):
         if bad:
             ax.plot(bad, [top] * len(bad), "x", color="tab:red", ms=6, mew=2)
         ax.set_yscale("log")
+        # labels on the decades only: the minor ones of a narrow log range overlap
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(d.key.replace(f"{CONTROLLER_SECTION}.", ""), fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[len(dims):]:
