@@ -62,7 +62,7 @@ from ..config.files import read_param_file
 from ..config.scenario import load_scenario
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .campaign import default_workers, exclusive
-from .engine import CampaignError, execute_run, FIGURES, ProcessPool, RayCluster
+from .engine import CampaignError, execute_run, FIGURES, ProcessPool, RayCluster, RunResult
 from .spec import load_spec, resolve_overrides, Run
 from .tune_space import DEFAULT_SPACE, load_space
 
@@ -236,8 +236,6 @@ class Executor:
             results[result.run.index] = result
             self.on_run()
 
-        from .engine import RunResult
-
         for run in runs:
             if run.problem:
                 record(RunResult(run, "failed", {}, f"not started: {run.problem}", 0, math.nan))
@@ -292,8 +290,6 @@ class Tuning:
 def prepare(settings):
     """Check the settings, load the configuration and the space; no run, no file written."""
     settings.check()
-    if settings.ray and settings.ray != "auto" and not settings.ray.strip():
-        raise CampaignError("--ray: give auto or a cluster address")
     _import_optuna()
     if not os.path.isfile(settings.config):
         raise CampaignError(f"--config {settings.config}: no such file")

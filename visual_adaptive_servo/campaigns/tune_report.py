@@ -26,9 +26,11 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
 import yaml
 
-from ..schema import CONTROLLER_SECTION
+from ..config.scenario import load_scenario
+from ..schema import CONTROLLER_SECTION, ConfigError
 from .spec import yaml_text
 
 TUNED_NAME = "tuned.yaml"
@@ -183,9 +185,11 @@ def write_outputs(tuning, study, optuna, best, values, held_out, notes, wall, in
         header += [verdict, "changed: " + ("; ".join(changes) or "nothing"), ""]
         with open(s.config, encoding="utf-8") as handle:
             text = handle.read()
-        with open(os.path.join(out_dir, TUNED_NAME), "w", encoding="utf-8") as handle:
+        tuned_path = os.path.join(out_dir, TUNED_NAME)
+        with open(tuned_path, "w", encoding="utf-8") as handle:
             handle.write(tuned_text(text, values, comments, _wrap(header)))
         outputs.append(TUNED_NAME)
+        notes = notes + _check_tuned(tuned_path, s.config, values)
     plots = plot_tuning(trials, tuning.space, optuna, out_dir)
     lines = _markdown(tuning, trials, best, held_out, notes, wall, verdict, changes, plots,
                       optuna, train, held)
@@ -194,6 +198,22 @@ def write_outputs(tuning, study, optuna, best, values, held_out, notes, wall, in
     outputs += [REPORT_NAME, *plots, "study.db"]
     return {"verdict": verdict, "outputs": outputs, "interrupted": interrupted, "best": best,
             "held_out": held_out, "trials": len(trials), "wall_time_s": wall}
+
+
+def _check_tuned(tuned_path, config, values):
+    """tuned.yaml must load to the configuration the best trial's runs had; notes if not."""
+    expected = load_scenario(config, [f"{CONTROLLER_SECTION}.{k}={yaml_text(v)}"
+                                      for k, v in values.items()]).controller.params
+    try:
+        got = load_scenario(tuned_path).controller.params
+    except (ConfigError, FileNotFoundError) as exc:
+        return [f"{TUNED_NAME} does not load from {os.path.dirname(tuned_path)} ({exc}): it names "
+                f"files relative to {os.path.dirname(os.path.abspath(config))}; put it there"]
+    wrong = [k for k in expected if not np.array_equal(np.asarray(got[k], dtype=object),
+                                                       np.asarray(expected[k], dtype=object))]
+    if wrong:
+        raise RuntimeError(f"{tuned_path}: {wrong} differ from the tuned runs' values")
+    return []
 
 
 def _wrap(lines, width=95):
