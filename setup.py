@@ -51,10 +51,11 @@ setup(
         "opencv-python-headless>=4.8",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
-    # ray: `vas campaign --ray` (imported only then); optuna: `vas tune` (imported only then)
+    # ray: `vas campaign --ray` (imported only then); optuna: `vas tune` (imported only then;
+    # in the test extra too, so that CI runs test_tune.py: about a minute)
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
                              "flake8-comprehensions", "flake8-quotes", "flake8-import-order",
-                             "import-linter>=2.10"],
+                             "import-linter>=2.10", "optuna>=3.6"],
                     "ray": ["ray>=2.9"],
                     "tune": ["optuna>=3.6"]},
     zip_safe=True,
