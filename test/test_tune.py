@@ -30,6 +30,7 @@ from functools import partial
 
 import numpy as np
 import pytest
+import yaml
 
 from visual_adaptive_servo.campaigns.engine import CampaignError, RunResult
 from visual_adaptive_servo.campaigns.spec import load_spec, Run
@@ -177,7 +178,7 @@ def test_objective_ranks_divergence_then_the_torque_limit_then_the_error():
                               saturated=int(diverged <= i < diverged + saturated))
                       for i, e in enumerate(errors)])["objective"]
 
-    for _ in range(200):
+    for _ in range(100):
         n = int(rng.integers(1, 501))
         errors = rng.uniform(0.0, 2000.0, n)        # beyond the cap, too
         trial = partial(objective, errors)
@@ -224,7 +225,7 @@ def test_tuned_text_writes_values_in_place_and_keeps_the_file(tmp_path):
           ros__parameters:
             tolerance: 40.0
         """)
-    values = {"alpha": 7.5, "Gamma_z": [0.1, 0.1, 0.1], "K": [0.002, 0.003],
+    values = {"alpha": 7.5, "Gamma_z": [0.1, 0.1, 0.1], "K": [2e-06, 3e-21],
               "joint_damping.inertia_rate": 300.0, "safety.hold_time": 0.1, "frame_gain": 0.5}
     comments = {"alpha": "vas tune", "frame_gain": "vas tune, added"}
     new = tuned_text(text, values, comments, ["tuned", "figures here"])
@@ -233,6 +234,8 @@ def test_tuned_text_writes_values_in_place_and_keeps_the_file(tmp_path):
     assert after["controller_node"] == {**before["controller_node"], **values}
     assert after["sim_node"] == before["sim_node"]
     assert after["feature_detector"] == before["feature_detector"]
+    # 2e-06 is written so that YAML 1.1 (PyYAML, without the loader's coercion) reads a float
+    assert yaml.safe_load(new)["controller_node"]["ros__parameters"]["K"] == [2e-06, 3e-21]
     assert new.startswith("# tuned\n# figures here\n# my arm\n")
     assert "alpha: 7.5  # vas tune    # observer" in new
     assert "frame_gain: 0.5  # vas tune, added" in new

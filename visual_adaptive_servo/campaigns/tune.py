@@ -58,9 +58,9 @@ from functools import partial
 import numpy as np
 import yaml
 
-from ..config.files import read_param_file
+from ..config.files import apply_overrides, read_param_file
 from ..config.scenario import load_scenario
-from ..schema import CONTROLLER_SECTION, ConfigError
+from ..schema import CONTROLLER_SECTION, ConfigError, SIM_SECTION
 from .campaign import default_workers, exclusive
 from .engine import CampaignError, execute_run, FIGURES, ProcessPool, RayCluster, RunResult
 from .spec import load_spec, resolve_overrides, Run
@@ -210,11 +210,14 @@ def trial_runs(spec, scenario, gain_factors):
 
 
 def gain_values(gain_factors, scenario):
-    """{controller parameter: value} that ``gain_factors`` give (as the runs got them)."""
+    """{controller parameter: value} that ``gain_factors`` give (as the runs got them).
+
+    Read back from the runs' ``--set`` overrides by the loader's own reading of them
+    (``1e-06`` is a number there, as in ROS 2, though YAML 1.1 makes it a string).
+    """
     overrides, _ = resolve_overrides(gain_factors, scenario)
-    prefix = f"{CONTROLLER_SECTION}."
-    return {item.partition("=")[0][len(prefix):]: yaml.safe_load(item.partition("=")[2])
-            for item in overrides}
+    sections = apply_overrides({SIM_SECTION: {}, CONTROLLER_SECTION: {}}, overrides)
+    return sections[CONTROLLER_SECTION]
 
 
 class Executor:

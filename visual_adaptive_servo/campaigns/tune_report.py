@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import numpy as np
 import yaml
@@ -76,11 +77,20 @@ def _end(node):
     return node.end_mark.index
 
 
+def yaml_value(value):
+    """:func:`.spec.yaml_text`, with every float in a form YAML 1.1 reads as a float.
+
+    ``repr`` writes 1e-06, which PyYAML (YAML 1.1) reads as a string; 1.0e-06 is a
+    float to every reader.
+    """
+    return re.sub(r"(?<![\w.])(-?\d+)e([-+]\d+)", r"\1.0e\2", yaml_text(value))
+
+
 def tuned_text(text, values, comments, header):
     """The parameter file ``text`` with ``values`` ({param: value}) written in.
 
     ``comments`` ({param: text}) go after each value; ``header`` (lines) above
-    the file.  Values are written in YAML flow style (:func:`.spec.yaml_text`).
+    the file.  Values are written in YAML flow style (:func:`yaml_value`).
     """
     root = yaml.compose(text)
     section = None
@@ -95,9 +105,9 @@ def tuned_text(text, values, comments, header):
         note = f"  # {comments[name]}" if comments.get(name) else ""
         node = _find(params, name)
         if node is None or isinstance(node, yaml.MappingNode):
-            added.append(f"{name}: {yaml_text(value)}{note}")
+            added.append(f"{name}: {yaml_value(value)}{note}")
         else:
-            edits.append((node.start_mark.index, _end(node), yaml_text(value) + note))
+            edits.append((node.start_mark.index, _end(node), yaml_value(value) + note))
     if added:
         at = _end(params)
         line_end = text.find("\n", at)
