@@ -280,7 +280,7 @@ def _write_spec(path, body):
     return load_spec(path)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Tuning:
     """Everything a tuning works with, checked and loaded before the first run."""
 
