@@ -55,6 +55,9 @@ DESIGN_NAMES = ("delay_bandwidth", "gamma_max", "observer_ratio", "damping_per_s
 #: joint-velocity samples drawn for the Gram matrices (fixed seed: the design is repeatable)
 DESIGN_SAMPLES = 64
 DESIGN_SEED = 20150101
+#: the poses of those samples: q0 plus this standard deviation per joint [rad], so the
+#: Gram matrices see the neighbourhood the arm will move in, not one pose
+DESIGN_POSE_SPREAD = 0.1
 
 
 @dataclass(frozen=True)
@@ -94,19 +97,18 @@ class DesignSettings:
         return self.damping_per_sample / self.sample_time
 
 
-def normalized_gain(G, rate):
+def normalized_gain(G, rate, floor=1e-3):
     """Diagonal Gamma (p,) with lambda_max(Gamma^1/2 G Gamma^1/2) = ``rate``, Jacobi-shaped.
 
-    ``G`` (p, p) is a regressor's Gram matrix.  Columns that carry (almost) nothing
-    -- parameters the motion cannot excite -- get the gain of the weakest excited
-    column, not an unbounded one.
+    ``G`` (p, p) is a regressor's Gram matrix.  A column that carries less than
+    ``floor`` of the strongest's energy -- a parameter the typical motions hardly
+    excite -- is treated as having that much: its gain is at most 1/floor times
+    the strongest column's, not unbounded.
     """
     d = np.diag(G).copy()
-    excited = d > 1e-12 * d.max() if d.max() > 0.0 else np.zeros(d.shape, bool)
-    if not excited.any():
+    if not d.max() > 0.0:
         return np.full(d.shape, rate)
-    d_floor = d[excited].min()
-    d = np.maximum(d, d_floor)
+    d = np.maximum(d, floor * d.max())
     scale = 1.0 / np.sqrt(d)
     lam = np.linalg.eigvalsh(G * scale[:, None] * scale[None, :])[-1]
     return rate / (max(lam, 1.0) * d)
@@ -187,14 +189,17 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     G_perp = np.zeros((model.p_perp, model.p_perp))
     G_z = np.zeros((model.p_z, model.p_z))
     G_d = np.zeros((model.p_d, model.p_d))
-    for xi in xis:
+    poses = q0 + DESIGN_POSE_SPREAD * rng.standard_normal((DESIGN_SAMPLES, n))
+    for xi, q in zip(xis, poses):
         qd = J_pinv.dot(Z2 * xi)
-        Y_perp = qd.dot(W)                                        # eq (24)'s regressor
-        Y_z = x0[:, None] * qd.dot(dH2) + xi[:, None] * H2       # eq (25)'s, Y_z_bar + Y_z
+        Hq, dHq, _, Wq, _ = model.kinematic_tensors(q, zero)
+        Hq2, dHq2 = Hq.repeat(2, axis=0), dHq.repeat(2, axis=0)
+        Y_perp = qd.dot(Wq)                                       # eq (24)'s regressor
+        Y_z = x0[:, None] * qd.dot(dHq2) + xi[:, None] * Hq2     # eq (25)'s, Y_z_bar + Y_z
         G_perp += Y_perp.T.dot(Y_perp)
         G_z += Y_z.T.dot(Y_z)
         if D_inv is not None:
-            Y_d = model.dynamic_regressor(q0, qd, qd, gamma * qd)  # eq (23)'s
+            Y_d = model.dynamic_regressor(q, qd, qd, gamma * qd)   # eq (23)'s
             G_d += Y_d.T.dot(D_inv).dot(Y_d)
     z_mean = float(np.mean(np.abs(Z2)))
     kin_rate = settings.kinematic_rate * gamma
