@@ -123,3 +123,25 @@ def test_sensor_noise_has_the_stated_standard_deviation(level):
 def test_gamma_maps_the_linear_intensity():
     picture = _Flat(64, render.PictureSettings(gamma=2.2)).maker.picture()
     assert int(picture[0, 0, 0]) == round(255.0 * (64 / 255.0) ** (1 / 2.2))
+
+
+def test_motion_blur_averages_the_renderings_spread_over_the_exposure():
+    """Two renderings before each capture, at the first control instants after its samples.
+
+    30 Hz camera (nominal captures at 33.3 and 66.7 ms), 1 ms control, 10 ms exposure in 3
+    samples: renderings at the first instants at or after 10 and 5 ms before each nominal
+    capture, the third at the capture itself.
+    """
+    scenario = load_scenario(CONFIG, ["sim_node.picture.exposure=0.01",
+                                      "sim_node.picture.exposure_samples=3"])
+    sim = Simulator(scenario.sim)
+    rendered_at = []
+    original = sim.pictures.exposure_sample
+    sim.pictures.exposure_sample = lambda: (rendered_at.append(round(sim.t, 4)), original())
+    try:
+        for _ in range(70):
+            sim.measure()
+            sim.apply(np.zeros(7))
+    finally:
+        sim.close()
+    assert rendered_at == [0.024, 0.029, 0.057, 0.062]
