@@ -252,14 +252,13 @@ class FrameDetections:
 
     def __init__(self, config):
         self.config = config
+        self.detector = None if config is None else config.detector()
         self.errors = []
         self.without_features = 0
         self.reasons = {}
 
     def detect(self, meas):
-        from .vision.detection import detect
-
-        found = detect(meas.image, self.config)
+        found = self.detector.detect(meas.image)
         if found.pixels is None:
             self.without_features += 1
             kind = found.reason.split(":")[0]
