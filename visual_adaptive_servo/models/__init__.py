@@ -55,5 +55,5 @@ def make_model(name, structure=None, section="controller_node", search_dirs=(), 
     raise ValueError(f"model: unknown model name {name!r}; known: {list(MODEL_NAMES)}")
 
 
-__all__ = ["BACKENDS", "GRAVITY", "MODEL_NAMES", "STRUCTURE_PARAMS", "CylinderLink", "PaperRRRCamera",
-           "RobotCameraModel", "make_model"]
+__all__ = ["BACKENDS", "GRAVITY", "MODEL_NAMES", "STRUCTURE_PARAMS", "CylinderLink",
+           "PaperRRRCamera", "RobotCameraModel", "make_model"]

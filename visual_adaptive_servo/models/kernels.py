@@ -51,7 +51,7 @@ def cache_dir():
     return os.path.join(base, "visual_adaptive_servo", "numba")
 
 
-def _compiled(function):
+def compiled(function):
     """``numba.njit(cache=True)`` with :func:`cache_dir` as numba's cache directory.
 
     numba picks a function's cache directory when it is decorated, so the
@@ -83,7 +83,7 @@ def _mat_vec(M, v, out):
         out[i] = M[i, 0] * v[0] + M[i, 1] * v[1] + M[i, 2] * v[2]
 
 
-@_compiled
+@compiled
 def chain_tensors(q, qd, A, B, C, axes, revolute, frame, dirs, moves, known, prismatic,
                   z_index, perp_index, has_w0):
     """(H, dH, dH_rate, W, W_rate) of a chain: ``KinematicRegressor.tensors_numpy`` compiled.
@@ -201,7 +201,7 @@ def chain_tensors(q, qd, A, B, C, axes, revolute, frame, dirs, moves, known, pri
     return H, dH, dH_rate, W, W_rate
 
 
-@_compiled
+@compiled
 def paper_tensors(q, qd):
     """(H, dH, dH_rate, W, W_rate) of the paper's arm: ``kinematic_tensors_numpy`` compiled."""
     q1, q2, q3 = q[0], q[1], q[2]
