@@ -253,9 +253,8 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
         names = names or [str(i) for i in range(arr.shape[1])]
         columns += [f"{key}.{name}" for name in names]
         blocks.append(arr)
-    table = np.hstack(blocks)
-    write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"],
-              ([float(v) for v in row] + [s] for row, s in zip(table, status)))
+    write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"], np.hstack(blocks),
+              status)
     if plots and len(data["t"]) > 1:
         # matplotlib costs ~0.5 s to import: only runs that plot pay it (campaign workers
         # and benchmarks run headless)
