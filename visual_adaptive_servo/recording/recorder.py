@@ -136,32 +136,40 @@ class McapFile:
         return channel_id
 
     def write_chunk(self, records, index, compress=False):
-        """Write one chunk of message ``records`` (bytes) and its message indexes.
+        """Write one chunk of message ``records`` and its message indexes.
 
-        ``index`` maps each channel id with messages in the chunk to
-        (log times (P,) ns, offsets (P,) of its records in ``records``);
-        ``compress``: store the records LZ4-compressed (the offsets stay those
-        in the uncompressed records, as MCAP defines them).
+        ``records``: the message records, as one bytes-like object or a list of
+        them (written one after the other, so that a chunk of megabytes is not
+        copied into one more buffer); ``index`` maps each channel id with
+        messages in the chunk to (log times (P,) ns, offsets (P,) of its records
+        in ``records``); ``compress``: store the records LZ4-compressed (the
+        offsets stay those in the uncompressed records, as MCAP defines them).
         """
+        pieces = records if isinstance(records, list) else [records]
+        size = sum(memoryview(piece).nbytes for piece in pieces)
         start = min(int(times.min()) for times, _ in index.values())
         end = max(int(times.max()) for times, _ in index.values())
-        compression, stored = ("lz4", lz4.frame.compress(records)) if compress else ("", records)
-        body = (struct.pack("<QQQI", start, end, len(records), 0) + _string(compression)
-                + struct.pack("<Q", len(stored)))
-        chunk = _record(0x06, body + stored)
-        chunk_at = self._end
-        pieces, offsets, at = [chunk], [], chunk_at + len(chunk)
+        if compress:
+            compression, stored = "lz4", [lz4.frame.compress(b"".join(pieces))]
+        else:
+            compression, stored = "", pieces
+        stored_size = sum(memoryview(piece).nbytes for piece in stored)
+        body = (struct.pack("<QQQI", start, end, size, 0) + _string(compression)
+                + struct.pack("<Q", stored_size))
+        head = struct.pack("<BQ", 0x06, len(body) + stored_size) + body
+        chunk_at, chunk_size = self._end, len(head) + stored_size
+        indexes, offsets, at = [], [], chunk_at + chunk_size
         for channel_id, (times, where) in sorted(index.items()):
             entries = np.column_stack([times, where]).astype("<u8").tobytes()
-            pieces.append(_record(0x07, struct.pack("<HI", channel_id, len(entries)) + entries))
+            indexes.append(_record(0x07, struct.pack("<HI", channel_id, len(entries)) + entries))
             offsets.append(struct.pack("<HQ", channel_id, at))
-            at += len(pieces[-1])
-        self._write(b"".join(pieces))
+            at += len(indexes[-1])
+        self._write([head, *stored, b"".join(indexes)])
         offsets = b"".join(offsets)
         self.chunk_indexes.append(
-            struct.pack("<QQQQI", start, end, chunk_at, len(chunk), len(offsets)) + offsets
-            + struct.pack("<Q", at - chunk_at - len(chunk)) + _string(compression)
-            + struct.pack("<QQ", len(stored), len(records)))
+            struct.pack("<QQQQI", start, end, chunk_at, chunk_size, len(offsets)) + offsets
+            + struct.pack("<Q", at - chunk_at - chunk_size) + _string(compression)
+            + struct.pack("<QQ", stored_size, size))
         for channel_id, (times, _) in index.items():
             self.counts[channel_id] += len(times)
         self.start = start if self.start is None else min(self.start, start)
@@ -188,14 +196,17 @@ class McapFile:
             self._tmp.unlink(missing_ok=True)
 
     def _write(self, data):
+        """Append ``data`` (bytes-like, or a list of them) to the file, all of it or nothing."""
+        pieces = data if isinstance(data, list) else [data]
         try:
-            self._out.write(data)
+            for piece in pieces:
+                self._out.write(piece)
         except BaseException:
             # a write cut short (Ctrl-C) is undone: the file ends with whole records
             self._out.seek(self._end)
             self._out.truncate()
             raise
-        self._end += len(data)
+        self._end = self._out.tell()
 
     def _write_summary(self):
         pairs = _string("serialized_metadata") + _string(self._bag_metadata())
@@ -466,6 +477,7 @@ class McapRecorder:
                     at += len(record)
             done = row_ends[s]
         parts.append(data[done:])
+        parts = [part for part in parts if len(part)]
         index = {}
         for j, (topic, *_) in enumerate(numbers):
             rows = present[:, j]
