@@ -138,21 +138,14 @@ def test_compiled_tensors_equal_numpy_at_every_sample_of_a_closed_loop_run(shipp
         assert_tensors_equal(out, reference(q, qd), f"{name} call {k}")
 
 
-def _use_numpy(model):
-    if isinstance(model, PaperRRRCamera):
-        model.backend = "numpy"
-    else:
-        model.kinematics.backend = "numpy"
-
-
 def test_closed_loop_figures_are_the_same_with_either_backend(shipped, tmp_path):
     name, _ = shipped
     path = os.path.join(ROOT, "config", name)
     runs = {}
     for backend in ("compiled", "numpy"):
         scenario = load_scenario(path)
-        if backend == "numpy":
-            _use_numpy(scenario.controller.model)
+        scenario.controller.model.set_backend(backend)
+        assert scenario.controller.model.backend == backend
         out = tmp_path / backend
         run_scenario(scenario, str(out), DURATIONS[name], progress=False, record=False,
                      plots=False)

@@ -120,9 +120,7 @@ class KinematicRegressor:
         self.z_reduction = self._reduce(z_samples, self.z_full_labels)
         self.perp_reduction = self._reduce(perp_samples, self.perp_full_labels)
         self._gather()
-        self.backend = resolve_backend(backend)
-        if self.backend == "compiled":
-            self._kernel_arguments()
+        self.set_backend(backend)
 
     # -- structure -----------------------------------------------------------------
     def _lengths(self, unknown):
@@ -364,12 +362,19 @@ class KinematicRegressor:
         self._perp_index = self._perp_gather([self._perp_cols[b] for b in pb])
         self.p_z, self.p_perp = len(zb), len(pb)
 
-    def _kernel_arguments(self):
-        """The constant arrays of :func:`.kernels.chain_tensors`, and its first call.
+    def set_backend(self, backend):
+        """Run :meth:`tensors` on ``backend`` from now on (None: compiled when numba imports).
 
-        The first call compiles the kernel (or loads it from numba's cache)
-        here, at construction, rather than in the first control period.
+        Choosing compiled compiles the kernel (or loads it from numba's cache)
+        here, rather than in the first control period.
         """
+        backend = resolve_backend(backend)
+        if backend == "compiled":
+            self._kernel_arguments()
+        self.backend = backend
+
+    def _kernel_arguments(self):
+        """The constant arrays of :func:`.kernels.chain_tensors`, and its first call."""
         index = np.intp
         self._kernel = kernels().chain_tensors
         self._kernel_constants = (
@@ -383,7 +388,7 @@ class KinematicRegressor:
             (3 * self._z_index[0] + self._z_index[1]).astype(index),
             (3 * self._perp_index[0] + self._perp_index[1]).astype(index), self.has_w0)
         zero = np.zeros(self.n)
-        self.tensors(zero, zero)
+        self._kernel(zero, zero, *self._kernel_constants)
 
     # -- public ----------------------------------------------------------------------
     def tensors(self, q, qd):

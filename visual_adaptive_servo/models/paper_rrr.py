@@ -84,10 +84,7 @@ class PaperRRRCamera(RobotCameraModel):
 
     def __init__(self, l1=2.0, links=None, focal_length=0.15, scale=900.0,
                  camera_distance=5.0, gravity=GRAVITY, backend=None):
-        self.backend = resolve_backend(backend)
-        if self.backend == "compiled":
-            self._kernel = kernels().paper_tensors
-            self._kernel(np.zeros(3), np.zeros(3))   # compile (or load) now, not in a period
+        self.set_backend(backend)
         if links is None:
             links = (CylinderLink(2.0, 3.0, 0.10), CylinderLink(2.0, 2.0, 0.05),
                      CylinderLink(2.0, 1.0, 0.05))
@@ -117,6 +114,18 @@ class PaperRRRCamera(RobotCameraModel):
         G1 = self.gravity * (link2.mass * lc2 + link3.mass * l2)
         G2 = self.gravity * link3.mass * lc3
         return np.array([P1, P2, P3, A, B, Cc, G1, G2])
+
+    def set_backend(self, backend):
+        """Run :meth:`kinematic_tensors` on ``backend`` from now on (see :mod:`.backend`).
+
+        Choosing compiled compiles the kernel (or loads it from numba's cache) here,
+        rather than in the first control period.
+        """
+        backend = resolve_backend(backend)
+        if backend == "compiled":
+            self._kernel = kernels().paper_tensors
+            self._kernel(np.zeros(3), np.zeros(3))
+        self.backend = backend
 
     def kinematic_tensors(self, q, qd):
         if self.backend == "numpy":

@@ -89,7 +89,7 @@ class UrdfArmCamera(RobotCameraModel):
                  gravity=GRAVITY, section="controller_node", search_dirs=(), backend=None):
         from .rigid_body import RigidBodyDynamics
 
-        self.backend = resolve_backend(backend, section)
+        backend = resolve_backend(backend, section)
 
         try:
             path = resolve_path(urdf, search_dirs, f"{section}.urdf")
@@ -106,8 +106,7 @@ class UrdfArmCamera(RobotCameraModel):
         self.offsets = offsets
         self.gravity = float(gravity)
         try:
-            self.kinematics = KinematicRegressor(self.chain, offsets, unknown_lengths,
-                                                 self.backend)
+            self.kinematics = KinematicRegressor(self.chain, offsets, unknown_lengths, backend)
         except ValueError as exc:
             raise ValueError(f"{section}.{exc}") from None
         self.dynamics = RigidBodyDynamics(path, base_link, tip_link, gravity)
@@ -126,6 +125,15 @@ class UrdfArmCamera(RobotCameraModel):
     @property
     def joint_names(self):
         return self.chain.joint_names
+
+    @property
+    def backend(self):
+        """``"compiled"`` or ``"numpy"``: what :meth:`kinematic_tensors` runs."""
+        return self.kinematics.backend
+
+    def set_backend(self, backend):
+        """Run :meth:`kinematic_tensors` on ``backend`` from now on (see :mod:`.backend`)."""
+        self.kinematics.set_backend(backend)
 
     def kinematic_tensors(self, q, qd):
         return self.kinematics.tensors(q, qd)
