@@ -173,7 +173,9 @@ def test_camera_latency_is_the_sim_node_parameter_when_it_exists(tmp_path):
 def test_shipped_specs_resolve():
     names = sorted(os.listdir(os.path.join(ROOT, "config", "campaigns")))
     assert names == ["compare.yaml", "noise_preset_1000.yaml", "noise_preset_sweep.yaml",
-                     "robustness.yaml", "start_and_estimates.yaml"]
+                     "noisy_pixels_iiwa.yaml", "real_camera_iiwa.yaml", "real_camera_panda.yaml",
+                     "real_camera_paper_urdf.yaml", "robustness.yaml",
+                     "start_and_estimates.yaml"]
     runs = {name: load_spec(os.path.join(ROOT, "config", "campaigns", name)).runs()
             for name in names}
     for name, spec_runs in runs.items():
@@ -181,6 +183,9 @@ def test_shipped_specs_resolve():
     assert len(runs["start_and_estimates.yaml"]) == 200
     assert len(runs["noise_preset_1000.yaml"]) == 1000
     assert len(runs["noise_preset_sweep.yaml"]) == 32 * 4
+    for name in ("noisy_pixels_iiwa.yaml", "real_camera_iiwa.yaml", "real_camera_panda.yaml",
+                 "real_camera_paper_urdf.yaml"):
+        assert len(runs[name]) == 100, name
     compare = runs["compare.yaml"]
     assert len(compare) == 12 * 2 * 5
     assert {r.controller for r in compare} == set(CONTROLLER_NAMES)

@@ -190,15 +190,31 @@ def test_runtime_gain_is_applied_and_invalid_changes_are_refused(context):
         ctl.destroy_node()
 
 
-@pytest.mark.parametrize("name, value, match", [
-    ("gamma", 40.0, r"alpha: Theorem 1 requires alpha > gamma/3"),
-    ("alpha", 10, r"controller_node\.alpha: .*type"),
-    ("model", "scara", r"controller_node\.model"),
-    ("sample_time", -1.0, r"controller_node\.sample_time: .*out of range"),
+@pytest.mark.parametrize("overrides, match", [
+    ({"alpha": 10.0, "gamma": 40.0}, r"alpha: Theorem 1 requires alpha > gamma/3"),
+    ({"alpha": 10}, r"controller_node\.alpha: .*type"),
+    ({"model": "scara"}, r"controller_node\.model"),
+    ({"sample_time": -1.0}, r"controller_node\.sample_time: .*out of range"),
+    ({"Gamma_z": [0.1, 0.2]}, r"controller_node\.Gamma_z: needs 3 values, got 2"),
 ])
-def test_invalid_configuration_is_refused_at_start_up(context, name, value, match):
+def test_invalid_configuration_is_refused_at_start_up(context, overrides, match):
     with pytest.raises(ConfigError, match=match):
-        ControllerNode(context=context, parameter_overrides=[Parameter(name, value=value)])
+        ControllerNode(context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in overrides.items()])
+
+
+def test_a_scalar_gain_and_a_gain_left_out_are_accepted(context):
+    # one number for a diagonal (dynamic typing), and the derived gains left unset
+    ctl = ControllerNode(context=context, parameter_overrides=[
+        Parameter("Gamma_z_perp", value=180.0), Parameter("K", value=[0.002, 0.003])])
+    try:
+        np.testing.assert_array_equal(ctl.tracker.config.Gamma_z_perp, [180.0, 180.0])
+        np.testing.assert_array_equal(ctl.tracker.config.K, [0.002, 0.003])
+        # Gamma_z not given: declared unset, derived at the first joint sample
+        assert ctl.tracker.config.Gamma_z is None
+        assert ctl.get_parameter("Gamma_z").type_ == Parameter.Type.NOT_SET
+    finally:
+        ctl.destroy_node()
 
 
 def test_unconvertible_joint_state_is_a_rejected_sample_not_a_crash(context):

@@ -31,7 +31,7 @@ from sim_bridge.camera import PinholeCamera
 from ..control.controller import check_alpha_gamma
 from ..control.gain_design import DESIGNED, DesignSettings
 from ..control.trajectory import SinusoidTrajectory, TabulatedTrajectory, TRAJECTORY_TYPES
-from ..models import make_model, MODEL_NAMES, RobotCameraModel, STRUCTURE_PARAMS
+from ..models import BACKENDS, make_model, MODEL_NAMES, RobotCameraModel, STRUCTURE_PARAMS
 from ..models.resources import resolve_path
 from ..schema import (CONTROLLER_SECTION, ConfigError, INF, ParamSpec, require_finite,
                       require_length, resolve_params, TIMING_MODES, ValidatedParams)
@@ -56,6 +56,9 @@ CONTROLLER_PARAMS = (
     ParamSpec("unknown_lengths", ["all"], "str_list",
               "model urdf: names of the lengths adapted as unknown (joint.x/y/z, point1.x, ...), "
               "or [all]; the others are taken from the URDF.", structure=True),
+    ParamSpec("backend", "auto", "str",
+              "Kinematic tensors: compiled (numba), numpy (the readable reference), or auto "
+              "(compiled when numba imports).", structure=True),
     ParamSpec("joint_names",
               lambda m, v: list(getattr(m, "joint_names", [f"joint{i + 1}" for i in range(m.n)])),
               "str_list",
@@ -238,14 +241,18 @@ def build_controller_model(values, section=CONTROLLER_SECTION, search_dirs=(), m
         raise ValueError(f"model: unknown model name {name!r}; known: {list(MODEL_NAMES)}")
     if model is not None and getattr(model, "structure", None) == _structure_key(values):
         return model
-    built = make_model(name, values, section, search_dirs)
+    backend = values.get("backend", "auto")
+    if backend not in ("auto",) + BACKENDS:
+        raise ValueError(f"backend: must be one of {['auto', *BACKENDS]}, got {backend!r}")
+    built = make_model(name, values, section, search_dirs,
+                       backend=None if backend == "auto" else backend)
     built.structure = _structure_key(values)
     return built
 
 
 def _structure_key(values):
     return tuple((k, tuple(v) if isinstance(v, (tuple, np.ndarray)) else v)
-                 for k, v in sorted(values.items()) if k in STRUCTURE_PARAMS)
+                 for k, v in sorted(values.items()) if k in STRUCTURE_PARAMS or k == "backend")
 
 
 @dataclass(frozen=True, eq=False)

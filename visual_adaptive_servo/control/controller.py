@@ -863,8 +863,8 @@ class AdaptiveVisualTracker:
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names)
-        for line in report.lines():
-            log.info("start: %s", line)
+        # one record: a node forwards the core's logging throttled per call site
+        log.info("start-up report:\n  %s", "\n  ".join(report.lines()))
         return report
 
     def _gains(self, D, designed=None):

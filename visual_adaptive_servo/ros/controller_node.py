@@ -139,10 +139,12 @@ class ControllerNode(Node):
         self.last_status = None
         self.t_last_diagnostics = None
         self.samples = 0
+        self.reported = None           # the tracker's start-up report, once logged
         self.log_handler = RosLogHandler(self.get_logger())
         logging.getLogger("visual_adaptive_servo").addHandler(self.log_handler)
-        self.get_logger().info(f"model {params['model']}, joints {self.joint_names}, "
-                               f"timing_mode {config.timing_mode}")
+        self.get_logger().info(f"model {params['model']} (kinematic tensors: "
+                               f"{getattr(config.model, 'backend', 'numpy')} backend), joints "
+                               f"{self.joint_names}, timing_mode {config.timing_mode}")
 
     # -- inputs ------------------------------------------------------------------
     def _on_features(self, msg):
@@ -174,6 +176,10 @@ class ControllerNode(Node):
         result = self.tracker.step(t, q, qd, x, x_stamp)
         self.samples += 1
         self._publish(result, state_msg.header.stamp)
+        if self.tracker.report is not self.reported:
+            # the gains derived at the first joint sample, the checks at the start pose
+            self.reported = self.tracker.report
+            self.get_logger().info("start-up report:\n  " + "\n  ".join(self.reported.lines()))
 
     # -- one sample's outputs ----------------------------------------------------
     def _publish(self, res, stamp):
