@@ -39,6 +39,18 @@ in:  lockstep: ``/controller_node/effort_command`` (sensor_msgs/JointState, torq
      rendered lockstep: ``/feature_detector/processed`` (std_msgs/Header: the detector
      has published the features of the picture with this stamp, if it found any).
 
+As a ros2_control hardware (``hardware.command_topic`` set, realtime): the
+commands come as ``joint_state_topic_hardware_interface/JointStateTopicSystem``
+sends them, a sensor_msgs/JointState with the torques in ``effort``, joints by
+name, on ``hardware.command_topic``, and the joint state goes out on
+``hardware.state_topic`` (the system's ``joint_states_topic``;
+``joint_state_broadcaster`` republishes it on /joint_states).  A command with
+NaN is no command (the hardware's command interfaces hold NaN until a
+controller writes them).  Without a command (before the first one, or none for
+``command_timeout``) the arm is held still on its brakes
+(:meth:`Simulator.hold`), time and /clock go on: the controller_manager runs
+on /clock, so the controllers can be activated before the arm moves.
+
 Timing (``timing_mode``)
 ------------------------
 The simulation starts once a controller is connected (it publishes the command
@@ -76,7 +88,8 @@ controller first: deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
-``command_timeout``).
+``command_timeout``; as a ros2_control hardware the latest command from
+``hardware.command_topic``, the brakes without one).
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
 is reliable (depth 10); in realtime the measurements (/joint_states, the
@@ -131,6 +144,8 @@ class SimNode(Node):
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
         self.lockstep = config.timing_mode == "lockstep"
+        self.hardware_topic = config["hardware.command_topic"]
+        self.state_topic = config["hardware.state_topic"]
         self.rendered = config.camera_mode == "rendered"
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
 
@@ -141,13 +156,18 @@ class SimNode(Node):
             for topic, kind, qos in (
                 *((topic, kind, measurement_qos) for topic, kind in camera_topics),
                 ("/clock", "Clock", RELIABLE),
-                ("/joint_states", "JointState", measurement_qos),
+                (self.state_topic, "JointState", measurement_qos),
                 ("~/true_depth", "Float64MultiArray", RELIABLE))}
+        # sim_outputs names the joint state /joint_states, wherever it is published
+        self.publishers_by_topic["/joint_states"] = self.publishers_by_topic.pop(self.state_topic)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         if self.lockstep:
             self.command_sub = self.create_subscription(
                 msgs.JointState, STAMPED_COMMAND_TOPIC, self._on_stamped_command, RELIABLE)
+        elif self.hardware_topic:
+            self.command_sub = self.create_subscription(
+                msgs.JointState, self.hardware_topic, self._on_hardware_command, RELIABLE)
         else:
             self.command_sub = self.create_subscription(
                 msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
@@ -186,9 +206,10 @@ class SimNode(Node):
         self.step_ns = None             # stamp of the joint state waiting for its command
         self.awaiting_detection = None  # stamp of the picture waiting for its features
         self.command, self.command_wall = None, None
+        self.braking = False
         self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
                          "stale_commands": 0, "frame_delivery_timeouts": 0,
-                         "detector_timeouts": 0}
+                         "detector_timeouts": 0, "held_periods": 0}
         self.problem = ""
         self.last_level, self.t_last_diagnostics = None, None
         self.wall_start = None
@@ -222,11 +243,13 @@ class SimNode(Node):
             need["/camera/image_raw"] = 1
             if self.config["start.wait_for_recorder"]:     # the detector's and the recorder's
                 need.update({"/camera/image_raw": 2, "/camera/camera_info": 1})
-        missing = [f"{topic} ({count} of {need[topic]} subscribers)"
+        names = {"/joint_states": self.state_topic}
+        missing = [f"{names.get(topic, topic)} ({count} of {need[topic]} subscribers)"
                    for topic in sorted(need)
                    for count in [matched[topic] if topic in matched else self._subscribers(topic)]
                    if count < need[topic]]
-        command = STAMPED_COMMAND_TOPIC if self.lockstep else COMMAND_TOPIC
+        command = (STAMPED_COMMAND_TOPIC if self.lockstep
+                   else self.hardware_topic or COMMAND_TOPIC)
         if self.command_sub.get_publisher_count() == 0:
             missing.append(f"{command} (no publisher)")
         if self.rendered and self.count_publishers(FEATURES_TOPIC) == 0:
@@ -276,6 +299,17 @@ class SimNode(Node):
     def _on_command(self, msg):
         self.command, self.command_wall = m.float_array_from_msg(msg)[0], time.monotonic()
 
+    def _on_hardware_command(self, msg):
+        try:
+            _, tau = m.effort_command_from_msg(msg, self.config.joint_names)
+        except ValueError as exc:
+            self.counters["refused_commands"] += 1
+            self.problem = f"{exc}: not applied"
+            self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+            return
+        if np.all(np.isfinite(tau)):
+            self.command, self.command_wall = tau, time.monotonic()
+
     def _on_command_timeout(self):
         if self.step_ns is None or self.finished.done():
             return
@@ -290,12 +324,37 @@ class SimNode(Node):
             return
         fresh = (self.command_wall is not None
                  and time.monotonic() - self.command_wall <= self.config.command_timeout)
+        if self.hardware_topic:
+            self._hardware_tick(fresh)
+            return
         if not fresh and self.command_wall is not None:
             self.counters["command_timeouts"] += 1
             self.problem = (f"command older than {self.config.command_timeout} s at "
                             f"t={self.sim.t:.3f}: zero torque applied")
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
         self._advance(self.command if fresh else np.zeros(self.sim.n))
+
+    def _hardware_tick(self, fresh):
+        """Apply the hardware's latest command, or hold the arm on its brakes without one."""
+        if fresh:
+            if self.braking:
+                self.braking = False
+                self.get_logger().info(f"command from {self.hardware_topic} at "
+                                       f"t={self.sim.t:.3f}: brakes released")
+            self._advance(self.command)
+            return
+        if not self.braking:
+            self.braking = True
+            why = ("no command yet" if self.command_wall is None else
+                   f"no command for {self.config.command_timeout} s")
+            self.get_logger().warning(f"{why} from {self.hardware_topic} at t={self.sim.t:.3f}: "
+                                      f"arm held on its brakes")
+        self.counters["held_periods"] += 1
+        if self.command_wall is not None:
+            self.problem = (f"no command for {self.config.command_timeout} s at "
+                            f"t={self.sim.t:.3f}: arm held on its brakes")
+        self.sim.hold()
+        self._advance_time()
 
     def _advance(self, tau, refused=None):
         """Hold ``tau`` for one period (zero torque if it is ``refused``: why), then measure."""
@@ -311,6 +370,10 @@ class SimNode(Node):
             self.counters["refused_commands"] += 1
             self.problem = f"{refused}; zero torque applied"
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+        self._advance_time()
+
+    def _advance_time(self):
+        """After a period: finish at ``duration``, else publish the new measurement."""
         duration = self.config.duration
         if duration > 0.0 and self.sim.t >= duration - 1e-9:
             self._finish()
@@ -329,7 +392,8 @@ class SimNode(Node):
             f"in {wall:.1f} s wall time; {c['command_timeouts']} command timeouts, "
             f"{c['refused_commands']} refused commands, {c['stale_commands']} stale commands, "
             f"{c['frame_delivery_timeouts']} frame delivery timeouts, "
-            f"{c['detector_timeouts']} detector timeouts")
+            f"{c['detector_timeouts']} detector timeouts, "
+            f"{c['held_periods']} periods held on the brakes")
         self.finished.set_result(True)
 
     # -- outputs -----------------------------------------------------------------

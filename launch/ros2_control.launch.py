@@ -1,0 +1,143 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""A scenario through a real ros2_control stack (needs ros2_control installed).
+
+    ros2 launch visual_adaptive_servo ros2_control.launch.py params_file:=/path/scenario.yaml
+
+The chain: controller_node -> /effort_controller/commands -> effort_controller
+(effort_controllers/JointGroupEffortController) -> controller_manager ->
+JointStateTopicSystem -> sim_node, and back: sim_node -> JointStateTopicSystem ->
+joint_state_broadcaster -> /joint_states -> controller_node.  The camera
+(/camera/features) goes from sim_node to controller_node directly.
+
+From the scenario file: the URDF of ``sim_node.urdf`` gets a ``<ros2_control>``
+tag for ``sim_node.joint_names`` (effort commands; position, velocity, effort
+states) and is latched on /robot_description (``robot_description`` node: the
+controller_manager of Jazzy reads it from that topic; no robot_state_publisher
+needed); the controller_manager runs ``controllers_file`` (default
+config/ros2_control.yaml) at 1 / ``sim_node.control_period`` Hz on /clock
+(use_sim_time), with the effort controller's joints in the scenario's order;
+the spawner loads and activates joint_state_broadcaster and effort_controller.
+sim_node runs in realtime as the hardware (``hardware.command_topic``
+HARDWARE_COMMANDS, ``hardware.state_topic`` HARDWARE_STATES): its arm stays on
+its brakes until the first command and whenever the commands stop for
+``command_timeout``.  The launch shuts down when sim_node exits (after
+``duration`` of simulated time); the other processes may stop alone (the
+controller node, the controller manager) and the simulator says what it then
+does.  ``record:=true`` records the package's topics and the two hardware
+topics with ``ros2 bag record -s mcap``, as servo.launch.py does.
+"""
+
+import os
+import tempfile
+
+import yaml
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    ExecuteProcess,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    TimerAction,
+)
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from visual_adaptive_servo.config.ros2_control import (
+    controller_manager_parameters,
+    robot_description,
+)
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.recording.recorder import TOPICS
+
+PACKAGE = "visual_adaptive_servo"
+HARDWARE_COMMANDS = "/sim_node/joint_commands"
+HARDWARE_STATES = "/sim_node/joint_states"
+COMMAND_TIMEOUT = 0.05   # s of wall time without a command before the simulated brakes engage
+RECORDER_GRACE = 1.0     # s of wall time between the simulator's exit and the shutdown
+
+
+def _nodes(context):
+    params_file = LaunchConfiguration("params_file").perform(context)
+    controllers_file = LaunchConfiguration("controllers_file").perform(context)
+    record = LaunchConfiguration("record").perform(context) == "true"
+    hardware = {"timing_mode": "realtime", "hardware.command_topic": HARDWARE_COMMANDS,
+                "hardware.state_topic": HARDWARE_STATES, "command_timeout": COMMAND_TIMEOUT}
+    sim = load_scenario(params_file, [f"sim_node.{k}={v}" for k, v in hardware.items()]).sim
+    with open(sim.arm.chain.urdf, encoding="utf-8") as handle:
+        description = robot_description(handle.read(), sim.joint_names, HARDWARE_COMMANDS,
+                                         HARDWARE_STATES)
+    with open(controllers_file, encoding="utf-8") as handle:
+        manager = controller_manager_parameters(yaml.safe_load(handle), sim.joint_names,
+                                                sim.control_period)
+    with tempfile.NamedTemporaryFile("w", prefix="vas_ros2_control_", suffix=".yaml",
+                                     delete=False, encoding="utf-8") as handle:
+        yaml.safe_dump(manager, handle)
+    rate = manager["controller_manager"]["ros__parameters"]["update_rate"]
+
+    sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
+                    parameters=[params_file, dict(hardware, **{
+                        "start.wait_for_recorder": record})])
+    nodes = [
+        Node(package=PACKAGE, executable="robot_description", name="robot_description",
+             output="screen", parameters=[{"robot_description": description}]),
+        Node(package="controller_manager", executable="ros2_control_node",
+             name="controller_manager", output="screen",
+             parameters=[handle.name, {"use_sim_time": True}]),
+        Node(package="controller_manager", executable="spawner", output="screen",
+             arguments=["joint_state_broadcaster", "effort_controller",
+                        "--controller-manager", "/controller_manager"]),
+        sim_node,
+        Node(package=PACKAGE, executable="controller_node", name="controller_node",
+             output="screen",
+             parameters=[params_file, {"timing_mode": "realtime", "use_sim_time": True}]),
+    ]
+    shutdown = EmitEvent(event=Shutdown(reason="sim_node exited"))
+    actions = [
+        LogInfo(msg=f"{os.path.basename(params_file)} through ros2_control: controller_manager "
+                    f"at {rate} Hz, joints {list(sim.joint_names)}"),
+        RegisterEventHandler(OnProcessExit(target_action=sim_node, on_exit=[
+            TimerAction(period=RECORDER_GRACE, actions=[shutdown]) if record else shutdown])),
+    ]
+    if record:
+        bag_dir = LaunchConfiguration("bag_dir").perform(context)
+        cmd = ["ros2", "bag", "record", "-s", "mcap"] + (["-o", bag_dir] if bag_dir else [])
+        cmd += ["--topics"] + sorted(TOPICS) + [HARDWARE_COMMANDS, HARDWARE_STATES]
+        actions += [LogInfo(msg="recording: " + " ".join(cmd)),
+                    ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
+    return nodes + actions
+
+
+def generate_launch_description():
+    share = get_package_share_directory(PACKAGE)
+    return LaunchDescription([
+        DeclareLaunchArgument("params_file",
+                              default_value=os.path.join(share, "config", "paper_3dof.yaml"),
+                              description="Scenario YAML (sim_node and controller_node sections)"),
+        DeclareLaunchArgument("controllers_file",
+                              default_value=os.path.join(share, "config", "ros2_control.yaml"),
+                              description="controller_manager parameters (controller types); "
+                                          "update_rate and the effort controller's joints "
+                                          "come from the scenario"),
+        DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
+                              description="Record the package and hardware topics (MCAP)"),
+        DeclareLaunchArgument("bag_dir", default_value="",
+                              description="Output folder of the recording (must not exist)"),
+        OpaqueFunction(function=_nodes),
+    ])
