@@ -29,11 +29,15 @@ controller_manager of Jazzy reads it from that topic; no robot_state_publisher
 needed); the controller_manager runs ``controllers_file`` (default
 config/ros2_control.yaml) at 1 / ``sim_node.control_period`` Hz on /clock
 (use_sim_time), with the effort controller's joints in the scenario's order;
-the spawner loads and activates joint_state_broadcaster and effort_controller.
+the spawner loads effort_controller and joint_state_broadcaster and activates
+them in one switch (controller_node starts tracking at its first /joint_states:
+its commands must reach the arm from then on).
 sim_node runs in realtime as the hardware (``hardware.command_topic``
 HARDWARE_COMMANDS, ``hardware.state_topic`` HARDWARE_STATES): its arm stays on
-its brakes until the first command and whenever the commands stop for
-``command_timeout``.  The launch shuts down when sim_node exits (after
+its brakes until the first command and whenever the commands stop for the
+file's ``command_timeout`` (a few periods would be too few: on a busy machine the
+controller_manager misses 50 ms now and then, and braking the arm mid-motion
+under a running controller makes it diverge on release).  The launch shuts down when sim_node exits (after
 ``duration`` of simulated time); the other processes may stop alone (the
 controller node, the controller manager) and the simulator says what it then
 does.  ``record:=true`` records the package's topics and the two hardware
@@ -69,7 +73,6 @@ from visual_adaptive_servo.recording.recorder import TOPICS
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
 HARDWARE_STATES = "/sim_node/joint_states"
-COMMAND_TIMEOUT = 0.05   # s of wall time without a command before the simulated brakes engage
 RECORDER_GRACE = 1.0     # s of wall time between the simulator's exit and the shutdown
 
 
@@ -78,7 +81,7 @@ def _nodes(context):
     controllers_file = LaunchConfiguration("controllers_file").perform(context)
     record = LaunchConfiguration("record").perform(context) == "true"
     hardware = {"timing_mode": "realtime", "hardware.command_topic": HARDWARE_COMMANDS,
-                "hardware.state_topic": HARDWARE_STATES, "command_timeout": COMMAND_TIMEOUT}
+                "hardware.state_topic": HARDWARE_STATES}
     sim = load_scenario(params_file, [f"sim_node.{k}={v}" for k, v in hardware.items()]).sim
     with open(sim.arm.chain.urdf, encoding="utf-8") as handle:
         description = robot_description(handle.read(), sim.joint_names, HARDWARE_COMMANDS,
@@ -100,8 +103,10 @@ def _nodes(context):
         Node(package="controller_manager", executable="ros2_control_node",
              name="controller_manager", output="screen",
              parameters=[handle.name, {"use_sim_time": True}]),
+        # both in one switch: controller_node starts tracking at its first /joint_states, so
+        # the broadcaster must not run before the effort controller passes its commands on
         Node(package="controller_manager", executable="spawner", output="screen",
-             arguments=["joint_state_broadcaster", "effort_controller",
+             arguments=["effort_controller", "joint_state_broadcaster", "--activate-as-group",
                         "--controller-manager", "/controller_manager"]),
         sim_node,
         Node(package=PACKAGE, executable="controller_node", name="controller_node",

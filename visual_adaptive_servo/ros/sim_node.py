@@ -196,8 +196,11 @@ class SimNode(Node):
                                                     self._on_detector_timeout, clock=steady,
                                                     autostart=False)
         else:
-            self.step_timer = self.create_timer(config.control_period, self._on_tick,
+            # as a ros2_control hardware the timer also publishes /clock half way between steps
+            ticks = 2 if self.hardware_topic else 1
+            self.step_timer = self.create_timer(config.control_period / ticks, self._on_tick,
                                                 clock=steady, autostart=False)
+        self.pending_clock = None
         self.ack_timeout = Duration(seconds=config.command_timeout)
 
         self.finished = Future()
@@ -322,6 +325,14 @@ class SimNode(Node):
     def _on_tick(self):
         if self.finished.done():
             return
+        if self.pending_clock is not None:
+            # the controller_manager runs a cycle when /clock moves; the joint state its
+            # hardware then reads left half a period ago, so it is there (published with
+            # the state, /clock would often overtake it: the broadcaster would stamp the
+            # previous state with the new time)
+            self.publishers_by_topic["/clock"].publish(self.pending_clock)
+            self.pending_clock = None
+            return
         fresh = (self.command_wall is not None
                  and time.monotonic() - self.command_wall <= self.config.command_timeout)
         if self.hardware_topic:
@@ -428,9 +439,15 @@ class SimNode(Node):
         self._publish_state(self.measurement)
 
     def _publish_state(self, meas):
-        """The frame (points mode), delivered first in lockstep, then the joint state."""
+        """The frame (points mode), delivered first in lockstep, then the joint state.
+
+        As a ros2_control hardware /clock follows half a period later (:meth:`_on_tick`).
+        """
         t = meas.t
         for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
+            if topic == "/clock" and self.hardware_topic:
+                self.pending_clock = msg        # half a period later (_on_tick)
+                continue
             pub = self.publishers_by_topic[topic]
             pub.publish(msg)
             if topic == FEATURES_TOPIC and self.lockstep and self.config["frame_ack"]:
