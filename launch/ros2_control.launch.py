@@ -38,9 +38,12 @@ its brakes until the first command and whenever the commands stop for the
 file's ``command_timeout`` (a few periods would be too few: on a busy machine the
 controller_manager misses 50 ms now and then, and braking the arm mid-motion
 under a running controller makes it diverge on release).  The launch shuts down when sim_node exits (after
-``duration`` of simulated time); the other processes may stop alone (the
-controller node, the controller manager) and the simulator says what it then
-does.  ``record:=true`` records the package's topics and the two hardware
+``duration`` of simulated time); the other processes may stop alone and the
+rest says what it then does.  controller_node tracks while effort_controller is
+active (``ros2_control.effort_controller``) and sim_node holds the arm on its
+brakes while it is not (``hardware.effort_controller``); when controller_node
+exits the effort controller is unspawned (deactivated and unloaded): it would
+otherwise go on sending the stopped node's last command.  ``record:=true`` records the package's topics and the two hardware
 topics with ``ros2 bag record -s mcap``, as servo.launch.py does.
 """
 
@@ -73,7 +76,18 @@ from visual_adaptive_servo.recording.recorder import TOPICS
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
 HARDWARE_STATES = "/sim_node/joint_states"
+EFFORT_CONTROLLER = "effort_controller"
 RECORDER_GRACE = 1.0     # s of wall time between the simulator's exit and the shutdown
+
+
+def _unspawn(event, context):
+    """controller_node exited: deactivate and unload the effort controller (not at shutdown)."""
+    if context.is_shutdown:
+        return None
+    return [LogInfo(msg=f"controller_node exited ({event.returncode}): unspawning "
+                        f"{EFFORT_CONTROLLER}"),
+            Node(package="controller_manager", executable="unspawner", output="screen",
+                 arguments=[EFFORT_CONTROLLER, "--controller-manager", "/controller_manager"])]
 
 
 def _nodes(context):
@@ -81,7 +95,8 @@ def _nodes(context):
     controllers_file = LaunchConfiguration("controllers_file").perform(context)
     record = LaunchConfiguration("record").perform(context) == "true"
     hardware = {"timing_mode": "realtime", "hardware.command_topic": HARDWARE_COMMANDS,
-                "hardware.state_topic": HARDWARE_STATES}
+                "hardware.state_topic": HARDWARE_STATES,
+                "hardware.effort_controller": EFFORT_CONTROLLER}
     sim = load_scenario(params_file, [f"sim_node.{k}={v}" for k, v in hardware.items()]).sim
     with open(sim.arm.chain.urdf, encoding="utf-8") as handle:
         description = robot_description(handle.read(), sim.joint_names, HARDWARE_COMMANDS,
@@ -94,6 +109,10 @@ def _nodes(context):
         yaml.safe_dump(manager, handle)
     rate = manager["controller_manager"]["ros__parameters"]["update_rate"]
 
+    controller_node = Node(package=PACKAGE, executable="controller_node", name="controller_node",
+                           output="screen", parameters=[params_file, {
+                               "timing_mode": "realtime", "use_sim_time": True,
+                               "ros2_control.effort_controller": EFFORT_CONTROLLER}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
                         "start.wait_for_recorder": record})])
@@ -106,15 +125,15 @@ def _nodes(context):
         # both in one switch: controller_node starts tracking at its first /joint_states, so
         # the broadcaster must not run before the effort controller passes its commands on
         Node(package="controller_manager", executable="spawner", output="screen",
-             arguments=["effort_controller", "joint_state_broadcaster", "--activate-as-group",
+             arguments=[EFFORT_CONTROLLER, "joint_state_broadcaster", "--activate-as-group",
                         "--controller-manager", "/controller_manager"]),
         sim_node,
-        Node(package=PACKAGE, executable="controller_node", name="controller_node",
-             output="screen",
-             parameters=[params_file, {"timing_mode": "realtime", "use_sim_time": True}]),
+        controller_node,
     ]
     shutdown = EmitEvent(event=Shutdown(reason="sim_node exited"))
     actions = [
+        # the effort controller would go on sending the last command of a stopped controller
+        RegisterEventHandler(OnProcessExit(target_action=controller_node, on_exit=_unspawn)),
         LogInfo(msg=f"{os.path.basename(params_file)} through ros2_control: controller_manager "
                     f"at {rate} Hz, joints {list(sim.joint_names)}"),
         RegisterEventHandler(OnProcessExit(target_action=sim_node, on_exit=[

@@ -100,6 +100,15 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
               "Topic of the simulator's sensor_msgs/JointState; with hardware.command_topic it "
               "is JointStateTopicSystem's joint_states_topic and must not be /joint_states "
               "(joint_state_broadcaster publishes there)."),
+    ParamSpec("hardware.effort_controller", "", "str",
+              "With hardware.command_topic: the controller that drives this hardware's effort "
+              "interfaces; while hardware.controller_manager/activity does not report it "
+              "active, the arm is held on its brakes (as a real driver stops when no controller "
+              "claims its interfaces; JointGroupEffortController commands zero effort when "
+              "deactivated, and the arm would fall). Empty: not watched (needs "
+              "controller_manager_msgs)."),
+    ParamSpec("hardware.controller_manager", "/controller_manager", "str",
+              "The controller_manager whose ~/activity hardware.effort_controller is read from."),
     ParamSpec("start.wait_for_recorder", False, "bool",
               "Start only once every recorded topic (visual_adaptive_servo.recording.recorder."
               "TOPICS) has a subscriber and /joint_states, /clock and the features have two "

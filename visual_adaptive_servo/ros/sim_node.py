@@ -49,7 +49,10 @@ NaN is no command (the hardware's command interfaces hold NaN until a
 controller writes them).  Without a command (before the first one, or none for
 ``command_timeout``) the arm is held still on its brakes
 (:meth:`Simulator.hold`), time and /clock go on: the controller_manager runs
-on /clock, so the controllers can be activated before the arm moves.
+on /clock, so the controllers can be activated before the arm moves.  With
+``hardware.effort_controller`` the arm is also held while that controller is not
+active (``<hardware.controller_manager>/activity``): JointGroupEffortController
+commands zero effort when it is deactivated, and the arm would fall.
 
 Timing (``timing_mode``)
 ------------------------
@@ -109,7 +112,7 @@ import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 
 from sim_bridge import render
@@ -132,6 +135,9 @@ DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing
 START_POLL = 0.05          # s of wall time between two checks for the subscribers
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
 WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
+# the controller_manager's ~/activity: published on every change, reliable and transient local
+ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class SimNode(Node):
@@ -171,6 +177,18 @@ class SimNode(Node):
         else:
             self.command_sub = self.create_subscription(
                 msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
+        self.effort_controller = config["hardware.effort_controller"] if self.hardware_topic \
+            else ""
+        self.effort_state = None if self.effort_controller else "active"
+        if self.effort_controller:
+            try:
+                from controller_manager_msgs.msg import ControllerManagerActivity
+            except ImportError:
+                raise ConfigError("sim_node.hardware.effort_controller: needs "
+                                  "controller_manager_msgs (ros2_control) installed") from None
+            self.create_subscription(ControllerManagerActivity,
+                                     f"{config['hardware.controller_manager']}/activity",
+                                     self._on_activity, ACTIVITY_QOS)
         self.processed_sub = None
         if self.rendered and self.lockstep:
             self.processed_sub = self.create_subscription(msgs.Header, PROCESSED_TOPIC,
@@ -209,7 +227,7 @@ class SimNode(Node):
         self.step_ns = None             # stamp of the joint state waiting for its command
         self.awaiting_detection = None  # stamp of the picture waiting for its features
         self.command, self.command_wall = None, None
-        self.braking = False
+        self.braking, self.brake_reason = False, ""
         self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
                          "stale_commands": 0, "frame_delivery_timeouts": 0,
                          "detector_timeouts": 0, "held_periods": 0}
@@ -313,6 +331,13 @@ class SimNode(Node):
         if np.all(np.isfinite(tau)):
             self.command, self.command_wall = tau, time.monotonic()
 
+    def _on_activity(self, msg):
+        states = {c.name: c.state.label for c in msg.controllers}
+        state = states.get(self.effort_controller, "not loaded")
+        if state != self.effort_state:
+            self.effort_state = state
+            self.get_logger().info(f"{self.effort_controller} is {state}")
+
     def _on_command_timeout(self):
         if self.step_ns is None or self.finished.done():
             return
@@ -347,23 +372,26 @@ class SimNode(Node):
 
     def _hardware_tick(self, fresh):
         """Apply the hardware's latest command, or hold the arm on its brakes without one."""
-        if fresh:
+        if fresh and self.effort_state == "active":
             if self.braking:
                 self.braking = False
-                self.get_logger().info(f"command from {self.hardware_topic} at "
+                self.get_logger().info(f"commands from {self.hardware_topic} at "
                                        f"t={self.sim.t:.3f}: brakes released")
             self._advance(self.command)
             return
         if not self.braking:
             self.braking = True
-            why = ("no command yet" if self.command_wall is None else
-                   f"no command for {self.config.command_timeout} s")
-            self.get_logger().warning(f"{why} from {self.hardware_topic} at t={self.sim.t:.3f}: "
-                                      f"arm held on its brakes")
+            if self.effort_state != "active":
+                why = f"{self.effort_controller} is {self.effort_state or 'not reported yet'}"
+            elif self.command_wall is None:
+                why = f"no command yet from {self.hardware_topic}"
+            else:
+                why = f"no command from {self.hardware_topic} for {self.config.command_timeout} s"
+            self.get_logger().warning(f"{why} at t={self.sim.t:.3f}: arm held on its brakes")
+            self.brake_reason = why
         self.counters["held_periods"] += 1
         if self.command_wall is not None:
-            self.problem = (f"no command for {self.config.command_timeout} s at "
-                            f"t={self.sim.t:.3f}: arm held on its brakes")
+            self.problem = f"{self.brake_reason} at t={self.sim.t:.3f}: arm held on its brakes"
         self.sim.hold()
         self._advance_time()
 
