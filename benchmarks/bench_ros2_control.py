@@ -84,8 +84,10 @@ def analyse(bag, period):
         answered.setdefault(np.asarray(msg.effort, float).tobytes(), []).append(_stamp_ns(msg))
 
     def answering(key, before_ns):
-        """Stamp of the newest joint state answered by torque ``key`` at or before ``before_ns``
-        (a torque at its limit answers many)."""
+        """The newest stamp at or before ``before_ns`` of a joint state ``key`` answers.
+
+        A torque at its limit answers many.
+        """
         stamps = [s for s in answered.get(key, ()) if s <= before_ns]
         return stamps[-1] if stamps else None
 

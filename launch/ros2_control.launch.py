@@ -33,18 +33,19 @@ the spawner loads effort_controller and joint_state_broadcaster and activates
 them in one switch (controller_node starts tracking at its first /joint_states:
 its commands must reach the arm from then on).
 sim_node runs in realtime as the hardware (``hardware.command_topic``
-HARDWARE_COMMANDS, ``hardware.state_topic`` HARDWARE_STATES): its arm stays on
-its brakes until the first command and whenever the commands stop for the
-file's ``command_timeout`` (a few periods would be too few: on a busy machine the
-controller_manager misses 50 ms now and then, and braking the arm mid-motion
-under a running controller makes it diverge on release).  The launch shuts down when sim_node exits (after
-``duration`` of simulated time); the other processes may stop alone and the
-rest says what it then does.  controller_node tracks while effort_controller is
-active (``ros2_control.effort_controller``) and sim_node holds the arm on its
-brakes while it is not (``hardware.effort_controller``); when controller_node
-exits the effort controller is unspawned (deactivated and unloaded): it would
-otherwise go on sending the stopped node's last command.  ``record:=true`` records the package's topics and the two hardware
-topics with ``ros2 bag record -s mcap``, as servo.launch.py does.
+HARDWARE_COMMANDS, ``hardware.state_topic`` HARDWARE_STATES): its arm stays on its
+brakes until the first command and whenever the commands stop for the file's
+``command_timeout`` (a few periods would be too few: on a busy machine the
+controller_manager misses 50 ms now and then, and braking the arm mid-motion under a
+running controller makes it diverge on release).  The launch shuts down when
+sim_node exits (after ``duration`` of simulated time); the other processes may stop
+alone and the rest says what it then does.  controller_node tracks while
+effort_controller is active (``ros2_control.effort_controller``) and sim_node holds
+the arm on its brakes while it is not (``hardware.effort_controller``); when
+controller_node exits the effort controller is unspawned (deactivated and unloaded):
+it would otherwise go on sending the stopped node's last command.  ``record:=true``
+records the package's topics and the two hardware topics with ``ros2 bag record -s
+mcap``, as servo.launch.py does.
 """
 
 import os
@@ -78,16 +79,26 @@ HARDWARE_COMMANDS = "/sim_node/joint_commands"
 HARDWARE_STATES = "/sim_node/joint_states"
 EFFORT_CONTROLLER = "effort_controller"
 RECORDER_GRACE = 1.0     # s of wall time between the simulator's exit and the shutdown
+UNSPAWN_DELAY = 0.2      # s of wall time between controller_node's exit and the unspawner
 
 
 def _unspawn(event, context):
-    """controller_node exited: deactivate and unload the effort controller (not at shutdown)."""
-    if context.is_shutdown:
-        return None
-    return [LogInfo(msg=f"controller_node exited ({event.returncode}): unspawning "
-                        f"{EFFORT_CONTROLLER}"),
-            Node(package="controller_manager", executable="unspawner", output="screen",
-                 arguments=[EFFORT_CONTROLLER, "--controller-manager", "/controller_manager"])]
+    """controller_node exited: deactivate and unload the effort controller, unless shutting down.
+
+    After ``UNSPAWN_DELAY``: a Ctrl-C reaches every process of the group at once, and
+    controller_node may exit before the launch has seen its own SIGINT (the timer is
+    cancelled by the shutdown).
+    """
+    def unspawn(context):
+        if context.is_shutdown:
+            return None
+        return [LogInfo(msg=f"controller_node exited ({event.returncode}): unspawning "
+                            f"{EFFORT_CONTROLLER}"),
+                Node(package="controller_manager", executable="unspawner", output="screen",
+                     arguments=[EFFORT_CONTROLLER, "--controller-manager",
+                                "/controller_manager"])]
+
+    return [TimerAction(period=UNSPAWN_DELAY, actions=[OpaqueFunction(function=unspawn)])]
 
 
 def _nodes(context):
@@ -100,7 +111,7 @@ def _nodes(context):
     sim = load_scenario(params_file, [f"sim_node.{k}={v}" for k, v in hardware.items()]).sim
     with open(sim.arm.chain.urdf, encoding="utf-8") as handle:
         description = robot_description(handle.read(), sim.joint_names, HARDWARE_COMMANDS,
-                                         HARDWARE_STATES)
+                                        HARDWARE_STATES)
     with open(controllers_file, encoding="utf-8") as handle:
         manager = controller_manager_parameters(yaml.safe_load(handle), sim.joint_names,
                                                 sim.control_period)

@@ -115,4 +115,3 @@ def controller_manager_parameters(base, joint_names, control_period,
     manager_params["update_rate"] = int(round(rate))
     params.setdefault(effort, {}).setdefault("ros__parameters", {})["joints"] = list(joint_names)
     return params
-
