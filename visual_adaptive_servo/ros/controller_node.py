@@ -73,7 +73,6 @@ from __future__ import annotations
 
 import logging
 import sys
-
 import time
 
 from rcl_interfaces.msg import SetParametersResult
