@@ -31,6 +31,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml") + glob("config/*.csv")),
         ("share/" + package_name + "/config/campaigns", glob("config/campaigns/*.yaml")),
+        ("share/" + package_name + "/config/tune", glob("config/tune/*.yaml")),
         ("share/" + package_name + "/urdf", glob("sim_bridge/urdf/*.urdf")),
     ],
     python_requires=">=3.10",
@@ -50,11 +51,13 @@ setup(
         "opencv-python-headless>=4.8",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
-    # ray: `vas campaign --ray` (imported only then)
+    # ray: `vas campaign --ray` (imported only then); optuna: `vas tune` (imported only then;
+    # in the test extra too, so that CI runs test_tune.py: about a minute)
     extras_require={"test": ["pytest>=7", "ruff>=0.5", "flake8>=6", "flake8-builtins",
                              "flake8-comprehensions", "flake8-quotes", "flake8-import-order",
-                             "import-linter>=2.10"],
-                    "ray": ["ray>=2.9"]},
+                             "import-linter>=2.10", "optuna>=3.6"],
+                    "ray": ["ray>=2.9"],
+                    "tune": ["optuna>=3.6"]},
     zip_safe=True,
     maintainer="visual_adaptive_servo maintainers",
     maintainer_email="maintainers@users.noreply.h-seed-00a3853d.example",

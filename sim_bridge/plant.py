@@ -16,7 +16,11 @@
 
 ROS-free.  PyBullet runs in DIRECT mode with an explicit time step; its default
 velocity motors and link damping are switched off, so the simulated arm is the
-rigid-body model M q_ddot + C q_dot + g = tau and nothing else.  A torque
+rigid-body model M q_ddot + C q_dot + g = tau and nothing else.  The URDF is
+checked before PyBullet reads it (:func:`~visual_adaptive_servo.models.urdf_checks.check_urdf`:
+every moving link's mass and inertia, every mesh), so what PyBullet would
+silently misread or refuse with a bare "Cannot load URDF file." is a
+``ConfigError`` naming the link, the file and the rule.  A torque
 command lasts one ``stepSimulation`` in PyBullet, so :meth:`ArmPlant.advance`
 re-applies it before every physics sub-step (zero-order hold over the control
 period).  The cameras are in :mod:`.camera`.
@@ -28,6 +32,9 @@ import os
 
 import numpy as np
 import pybullet
+
+from visual_adaptive_servo.models.urdf_checks import check_urdf, UrdfError
+from visual_adaptive_servo.schema import ConfigError, SIM_SECTION
 
 URDF_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "urdf")
 
@@ -52,10 +59,22 @@ class ArmPlant:
     feature_points : (m, 3), optional
         Offsets c_i of the feature points in the tip frame [m]; default the tip
         link's origin.
+    section : str
+        Configuration section named in a URDF error (``section.urdf: ...``).
+
+    Raises
+    ------
+    ConfigError
+        The URDF breaks a rule of :func:`~visual_adaptive_servo.models.urdf_checks.check_urdf`
+        (checked before PyBullet reads it).
     """
 
     def __init__(self, urdf, physics_dt=0.001, gravity=9.81, tip_link="tip", joint_names=None,
-                 feature_points=((0.0, 0.0, 0.0),)):
+                 feature_points=((0.0, 0.0, 0.0),), section=SIM_SECTION):
+        try:
+            check_urdf(os.path.abspath(urdf), joint_names, section, simulator=True)
+        except UrdfError as exc:
+            raise ConfigError(str(exc)) from None
         self.physics_dt = float(physics_dt)
         self.offsets = np.asarray(feature_points, dtype=float).reshape(-1, 3)
         self.client = pybullet.connect(pybullet.DIRECT)

@@ -26,6 +26,8 @@ Rendered at another size, coordinates scale with it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pybullet
 
@@ -109,3 +111,125 @@ def render_camera_view(client, camera, width, height, markers=()):
             cols, rows = image_coordinates(pixels, camera, width, height)
             draw_points(rgb, np.column_stack([cols, rows]), color, shape)
     return rgb
+
+
+@dataclass(frozen=True)
+class PictureSettings:
+    """How camera-like the rendered pictures are (``sim_node.picture.*``).
+
+    ``surroundings``: a textured floor and clutter behind the arm
+    (:func:`.scene.add_surroundings`); ``shading``: directional light with diffuse
+    and specular terms (:data:`.scene.CAMERA_LIGHT`) instead of flat colours;
+    ``exposure`` [s] and ``exposure_samples``: motion blur, the mean of that many
+    pictures spread over the exposure that ends at the capture; ``read_noise`` and
+    ``shot_noise``: Gaussian sensor noise of standard deviation
+    sqrt(read^2 + shot^2 I) on the intensity I in [0, 1]; ``gamma``: the picture is
+    I^(1/gamma) (1: linear), applied after the noise, as in a camera.  Each step on the
+    8-bit picture the renderer gives (so the picture's darkest levels are coarse).
+    """
+
+    surroundings: bool = False
+    shading: bool = False
+    exposure: float = 0.0
+    exposure_samples: int = 1
+    read_noise: float = 0.0
+    shot_noise: float = 0.0
+    gamma: float = 1.0
+
+    @property
+    def blurred(self):
+        return self.exposure > 0.0 and self.exposure_samples > 1
+
+
+class PictureMaker:
+    """Camera-like pictures of a PyBullet scene (:class:`PictureSettings`).
+
+    The surroundings do not move, so they are rendered once, in a PyBullet client of
+    their own, with their depth; each picture renders only the client's bodies (arm,
+    tag plate, occluders) and keeps a pixel of them where it is nearer than the
+    surroundings' (the same frustum, so the two depth buffers compare directly).
+    That costs about what the arm alone costs: with the floor and the boxes in the
+    same client the TinyRenderer takes 4 to 5 times as long (their textured pixels
+    cover most of the picture).
+    """
+
+    def __init__(self, client, camera, settings, seed=0):
+        self.client, self.camera, self.settings = client, camera, settings
+        self.rng = np.random.default_rng(seed)
+        self.light = {}
+        if settings.shading:
+            from .scene import CAMERA_LIGHT
+
+            self.light = CAMERA_LIGHT
+        self.background = None
+        if settings.surroundings:
+            self.background = self._render_surroundings(seed)
+        self.samples = []
+
+    def _render_surroundings(self, seed):
+        from .scene import add_surroundings
+
+        other = pybullet.connect(pybullet.DIRECT)
+        try:
+            add_surroundings(other, self.camera, seed)
+            return self._render(other)
+        finally:
+            pybullet.disconnect(other)
+
+    def _render(self, client):
+        """(rgb (h, w, 3) uint8, depth buffer (h, w) float32) of a client's bodies."""
+        W, H = self.camera.width, self.camera.height
+        view, projection = view_matrices(self.camera)
+        _, _, rgba, depth, _ = pybullet.getCameraImage(
+            W, H, viewMatrix=view, projectionMatrix=projection,
+            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            physicsClientId=client, **(self.light or FLAT_LIGHT))
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(H, W, 4)[:, :, :3]
+        return rgb, np.asarray(depth, dtype=np.float32).reshape(H, W)
+
+    def exposure_sample(self):
+        """Render one picture of the exposure now (motion blur: :meth:`picture` averages)."""
+        self.samples.append(self._composite())
+
+    def _composite(self):
+        import cv2
+
+        rgb, depth = self._render(self.client)
+        if self.background is None:
+            return rgb
+        bg_rgb, bg_depth = self.background
+        picture = bg_rgb.copy()
+        # cv2.copyTo: 1-2 ms against 5-20 ms for np.where over the 640 x 480 x 3 picture
+        cv2.copyTo(rgb, (depth < bg_depth).view(np.uint8), picture)
+        return picture
+
+    def picture(self):
+        """The picture captured now: (h, w, 3) uint8 RGB."""
+        import cv2
+
+        s = self.settings
+        frames = self.samples + [self._composite()]
+        self.samples = []
+        if len(frames) == 1:
+            picture = np.ascontiguousarray(frames[0])
+        else:
+            picture = np.rint(np.mean(np.stack(frames), axis=0)).astype(np.uint8)
+        if s.read_noise > 0.0 or s.shot_noise > 0.0:
+            # noise of each 8-bit level's intensity I: std sqrt(read^2 + shot^2 I), through a
+            # look-up table, and the normal samples by cv2.randn (a third of numpy's time)
+            levels = np.arange(256, dtype=np.float32) / np.float32(255.0)
+            std = 255.0 * np.sqrt(s.read_noise ** 2 + s.shot_noise ** 2 * levels)
+            noise = np.empty(picture.shape, np.float32)
+            cv2.setRNGSeed(int(self.rng.integers(2**31)))
+            # one channel: on an (h, w, 3) array cv2.randn would fill the first channel only
+            cv2.randn(noise.reshape(noise.shape[0], -1), 0.0, 1.0)
+            noisy = picture.astype(np.float32) + noise * cv2.LUT(picture, std.astype(np.float32))
+            picture = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        if s.gamma != 1.0:
+            picture = cv2.LUT(picture, self._gamma_table)
+        return picture
+
+    @property
+    def _gamma_table(self):
+        levels = np.arange(256) / 255.0
+        return np.rint(255.0 * levels ** (1.0 / self.settings.gamma)).astype(np.uint8)

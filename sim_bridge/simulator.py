@@ -37,6 +37,7 @@ from visual_adaptive_servo.models import GRAVITY
 from . import render
 from .camera import FeatureCamera
 from .plant import ArmPlant
+from .scene import TagBody
 
 
 @dataclass(frozen=True)
@@ -112,18 +113,28 @@ class Simulator:
         self.camera = config.camera
         # the markers are in the scene always (they show in any rendered view); in
         # rendered mode the camera's frames are pictures and the pixels come from a detector
-        self.plant.add_markers(config["markers.radius"], np.reshape(config["markers.colors"],
-                                                                    (-1, 3)))
+        self.tag = None
+        if config.tag is not None:
+            self.tag = TagBody(self.plant.client, config.tag)
+            self.tag.place(*self.plant.tip_pose())
+        else:
+            self.plant.add_markers(config["markers.radius"],
+                                   np.reshape(config["markers.colors"], (-1, 3)))
         self.rendered = config.camera_mode == "rendered"
         self.faults = Faults.from_config(config)
         self._occluder = None
         if self.rendered and self.faults.windows["occlusion"] is not None:
-            shape = pybullet.createVisualShape(
-                pybullet.GEOM_SPHERE, radius=3.0 * config["markers.radius"],
-                rgbaColor=(0.35, 0.35, 0.38, 1.0), physicsClientId=self.plant.client)
-            self._occluder = pybullet.createMultiBody(
-                baseMass=0.0, baseVisualShapeIndex=shape, baseCollisionShapeIndex=-1,
-                basePosition=(0.0, 0.0, -1e3), physicsClientId=self.plant.client)
+            self._occluder = self._make_occluder(config)
+        self.pictures = None
+        if self.rendered:
+            settings = render.PictureSettings(
+                config["picture.surroundings"], config["picture.shading"],
+                config["picture.exposure"], config["picture.exposure_samples"],
+                config["picture.read_noise"], config["picture.shot_noise"],
+                config["picture.gamma"])
+            self.pictures = render.PictureMaker(self.plant.client, self.camera, settings,
+                                                config.seed)
+            self._exposure_times = []
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
                                             config.camera_rate, config.camera_latency, config.seed)
         self.plant.reset(config.initial_positions, config.initial_velocities)
@@ -146,6 +157,8 @@ class Simulator:
         t = self.t
         true_pixels, true_depth = self.camera.project(self.plant.feature_positions())
         self._place_occluder(t)
+        if self.rendered and self.pictures.settings.blurred:
+            self._expose(t)
         frame = self.feature_camera.step(t, true_pixels, true_depth,
                                          self._render if self.rendered else None)
         problems = []
@@ -170,24 +183,82 @@ class Simulator:
         return Measurement(t, measured_q, qd, self.tau.copy(), stamp, pixels, true_depth,
                            true_pixels, tuple(problems), image, frame_truth, q)
 
+    def _make_occluder(self, config):
+        """The occluder of ``faults.occlusion``: a ball before point 1, a board across a tag."""
+        if self.tag is not None:
+            half = 0.6 * config.tag.plate_edge
+            shape = pybullet.createVisualShape(
+                pybullet.GEOM_BOX, halfExtents=[half, half, 0.005],
+                rgbaColor=(0.35, 0.35, 0.38, 1.0), physicsClientId=self.plant.client)
+        else:
+            shape = pybullet.createVisualShape(
+                pybullet.GEOM_SPHERE, radius=3.0 * config["markers.radius"],
+                rgbaColor=(0.35, 0.35, 0.38, 1.0), physicsClientId=self.plant.client)
+        return pybullet.createMultiBody(
+            baseMass=0.0, baseVisualShapeIndex=shape, baseCollisionShapeIndex=-1,
+            basePosition=(0.0, 0.0, -1e3), physicsClientId=self.plant.client)
+
     def _place_occluder(self, t):
-        """In rendered mode, an occlusion window puts an opaque ball in front of point 1."""
+        """In rendered mode, an occlusion window puts an opaque object between camera and marker.
+
+        Balls: a ball in front of point 1 for the whole window.  A tag: a board, facing
+        the camera, that crosses the line of sight to the tag's centre from one side of
+        the picture to the other during the window (it covers the tag in its middle part
+        and cuts it at both ends).
+        """
         if self._occluder is None:
             return
-        inside = self.faults.active("occlusion", t)
-        if inside:
-            point = self.plant.feature_positions()[0]
-            where = point + 0.3 * (np.asarray(self.camera.position) - point)
-        else:
-            where = np.array([0.0, 0.0, -1e3])
-        pybullet.resetBasePositionAndOrientation(self._occluder, where.tolist(),
-                                                 (0.0, 0.0, 0.0, 1.0),
+        where = np.array([0.0, 0.0, -1e3])
+        if self.faults.active("occlusion", t):
+            eye = np.asarray(self.camera.position, dtype=float)
+            if self.tag is None:
+                point = self.plant.feature_positions()[0]
+                where = point + 0.3 * (eye - point)
+            else:
+                R, p = self.plant.tip_pose()
+                centre = p + R @ np.asarray(self.config.tag.position, dtype=float)
+                start, length = self.faults.windows["occlusion"]
+                # from -1.5 to +1.5 board widths across the view over the window
+                side = (3.0 * (t - start) / length - 1.5) * 1.2 * self.config.tag.plate_edge
+                where = centre + 0.3 * (eye - centre) \
+                    + side * np.asarray(self.camera.rotation[0], dtype=float)
+        quaternion = (0.0, 0.0, 0.0, 1.0)
+        if self.tag is not None:
+            from .scene import rotation_quaternion
+
+            # the board's Z along the optical axis: it faces the camera
+            quaternion = rotation_quaternion(np.asarray(self.camera.rotation, dtype=float).T)
+        pybullet.resetBasePositionAndOrientation(self._occluder, where.tolist(), quaternion,
                                                  physicsClientId=self.plant.client)
 
+    def _expose(self, t):
+        """Motion blur: render the exposure's earlier samples at their instants."""
+        settings = self.pictures.settings
+        capture = self.feature_camera.captured * self.feature_camera.period
+        if not self._exposure_times and t < capture - 1e-9:
+            count = settings.exposure_samples
+            # the capture renders the last sample; these are the ones before it
+            times = [capture - settings.exposure * (count - 1 - j) / (count - 1)
+                     for j in range(count - 1)]
+            self._exposure_times = [u for u in times if u > t - self._period + 1e-9]
+        while self._exposure_times and self._exposure_times[0] <= t + 1e-9:
+            self._exposure_times.pop(0)
+            if t < capture - 1e-9:
+                self._show_markers()
+                self.pictures.exposure_sample()
+        if t >= capture - 1e-9:
+            self._exposure_times = []
+
+    def _show_markers(self):
+        if self.tag is not None:
+            self.tag.place(*self.plant.tip_pose())
+        else:
+            self.plant.place_markers()
+
     def _render(self):
-        """The camera's picture now: markers placed, flat light (colours exactly as set)."""
-        self.plant.place_markers()
-        return render.render_image(self.plant.client, self.camera, flat=True)
+        """The camera's picture now, markers placed (render.PictureMaker: how it looks)."""
+        self._show_markers()
+        return self.pictures.picture()
 
     def apply(self, tau):
         """Hold ``tau`` for one control period; returns a reason if it was refused."""

@@ -52,7 +52,7 @@ def test_every_schema_entry_has_a_description():
 
 @pytest.mark.parametrize("override, message", [
     ("controller_node.alpha=3.0", r"controller_node\.alpha: Theorem 1 requires alpha > gamma/3"),
-    ("controller_node.K=[0.001]", r"controller_node\.K: needs 2 values, got 1"),
+    ("controller_node.K=[0.001, 0.002, 0.003]", r"controller_node\.K: needs 2 values, got 3"),
     ("controller_node.K=[0.001, 0.0]", r"controller_node\.K: every entry must be > 0"),
     ("controller_node.gamma=-1.0", r"controller_node\.gamma: must be >= 0.0"),
     ("controller_node.Gamma_d=[1, 1]", r"controller_node\.Gamma_d: needs 8 values, got 2"),

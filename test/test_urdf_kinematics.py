@@ -21,6 +21,7 @@ and time rates).
 """
 
 import os
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pybullet
@@ -106,10 +107,30 @@ def fd(fun, q, qd, h=H_FD):
     return (fun(q + h * qd) - fun(q - h * qd)) / (2 * h)
 
 
-def test_chain_forward_kinematics_matches_pybullet_link_frames(arm, rng):
+def kinematic_copy(urdf, folder):
+    """``urdf`` with the same joints; every link 1 kg, inertia diag(0.01), no shapes.
+
+    pybullet_data's xarm6 carries inertia tensors PyBullet zeroes (so the plant
+    refuses the file, see test_urdf_checks.py); the frames compared here do
+    not depend on any mass property or mesh.
+    """
+    tree = ET.parse(urdf)
+    for link in tree.getroot().findall("link"):
+        for child in list(link):
+            link.remove(child)
+        inertial = ET.SubElement(link, "inertial")
+        ET.SubElement(inertial, "mass", value="1")
+        ET.SubElement(inertial, "inertia", ixx="0.01", ixy="0", ixz="0", iyy="0.01", iyz="0",
+                      izz="0.01")
+    path = os.path.join(folder, "kinematics_" + os.path.basename(urdf))
+    tree.write(path)
+    return path
+
+
+def test_chain_forward_kinematics_matches_pybullet_link_frames(arm, rng, tmp_path):
     chain, offsets, _ = arm
-    with ArmPlant(chain.urdf, tip_link=chain.tip_link, joint_names=chain.joint_names,
-                  feature_points=offsets) as plant:
+    with ArmPlant(kinematic_copy(chain.urdf, tmp_path), tip_link=chain.tip_link,
+                  joint_names=chain.joint_names, feature_points=offsets) as plant:
         root = chain.root_to_base
         for _ in range(5):
             q = rng.uniform(-1.5, 1.5, chain.n)

@@ -18,7 +18,8 @@
 process, without ROS, and writes summary.json, timeseries.csv, PNG plots and a
 rosbag2 MCAP file.  ``vas teach`` records a realisable desired trajectory,
 ``vas robustness`` and ``vas compare`` run the robustness matrix and the
-comparison with the baselines.
+comparison with the baselines, ``vas campaign`` a campaign spec, ``vas tune``
+searches the gains for a configuration (Optuna, an optional extra).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import sys
 
 from .campaigns.campaign import add_parser as add_campaign_parser
 from .campaigns.compare import add_parser as add_compare_parser
+from .campaigns.tune import add_parser as add_tune_parser
 from .config.scenario import load_scenario
 from .control.registry import CONTROLLER_NAMES, controller_factory
 from .schema import ConfigError
@@ -65,7 +67,8 @@ def cmd_run(args):
     scenario = load_scenario(args.config, _run_overrides(args))
     summary = run_scenario(scenario, args.out, duration=args.duration, progress=args.progress,
                            record=not args.no_bag,
-                           controller_factory=controller_factory(args.controller))
+                           controller_factory=controller_factory(args.controller),
+                           announce=print)
     print(json.dumps({k: summary[k] for k in (
         "diverged", "final_rms_error_px", "max_error_px", "final_rms_true_error_px",
         "max_abs_torque", "final_depth_error", "sim_time_s", "wall_time_s", "realtime_factor")},
@@ -138,6 +141,7 @@ def build_parser():
     add_compare_parser(sub)
     add_teach_parser(sub, _floats)
     add_campaign_parser(sub)
+    add_tune_parser(sub)
     return parser
 
 

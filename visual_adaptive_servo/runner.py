@@ -36,7 +36,7 @@ from sim_bridge.simulator import Simulator
 from .control.controller import AdaptiveVisualTracker
 from .recording import messages as m
 from .recording.recorder import McapRecorder, write_csv, write_json
-from .recording.summary import camera_figures, summarize
+from .recording.summary import camera_figures, divergence_origin, summarize
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +74,8 @@ class Series:
         shapes = {"t": (), "x": (m2,), "x_true": (m2,), "x_d": (m2,), "x_obs": (m2,), "z": (m,),
                   "z_hat": (m,),
                   "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
-                  "a_z": (model.p_z,), "a_d": (model.p_d,)}
+                  "a_z": (model.p_z,), "a_d": (model.p_d,), "sigma_min_J_star": (),
+                  "damped": ()}
         self.data = {k: np.full((steps,) + s, np.nan) for k, s in shapes.items()}
         self.status = []
         self.count = 0
@@ -89,8 +90,31 @@ class Series:
         return {k: v[:self.count] for k, v in self.data.items()}
 
 
+def start_report(ctl, scenario):
+    """The controller's start-up report at the simulated start pose, as text lines.
+
+    The controller fixes its damping and derives the gains it was not given there
+    (``AdaptiveVisualTracker.start``; a ConfigError refuses the run before it
+    starts); the simulator's ground truth adds the true J(q0, x0)'s sigma_min.
+    Controllers without a start (the calibrated baseline) report nothing.
+    """
+    start = getattr(ctl, "start", None)
+    if start is None:
+        return []
+    q0 = np.asarray(scenario.sim.initial_positions, dtype=float)
+    lines = start(q0).lines()
+    model = scenario.controller.model
+    x0, _ = model.project(q0)
+    sigma = np.linalg.svd(model.true_image_jacobian(q0, x0), compute_uv=False)[-1]
+    floor = scenario.controller["min_singular_value"]
+    lines.append(f"true J(q0, x0): sigma_min {sigma:.4g} px m/rad"
+                 + (f" -- below min_singular_value {floor:g}: near a singular pose"
+                    if sigma < floor else ""))
+    return lines
+
+
 def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, plots=True,
-                 faults=None, controller_factory=AdaptiveVisualTracker):
+                 faults=None, controller_factory=AdaptiveVisualTracker, announce=None):
     """Run the closed loop and write every output into ``out_dir``; return the summary.
 
     Parameters
@@ -111,14 +135,19 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         ``step(t, q, qd, x)`` returning a :class:`~.control.controller.StepResult`; default the
         paper's :class:`~.control.controller.AdaptiveVisualTracker` (``vas compare`` passes
         the baselines).
+    announce : callable, optional
+        Called with the start-up report (text) before the run starts (``vas run``: print).
     """
     os.makedirs(out_dir, exist_ok=True)
     duration = duration or scenario.sim.duration or 30.0
     period = scenario.sim.control_period
     steps = int(round(duration / period))
     model = scenario.controller.model
-    sim = Simulator(scenario.sim)
     ctl = controller_factory(scenario.controller)
+    start = start_report(ctl, scenario)
+    if announce is not None and start:
+        announce("\n".join(["start-up report:"] + [f"  {line}" for line in start]))
+    sim = Simulator(scenario.sim)
     series = Series(steps, model)
     counters = {"rejected": 0, "fallback": 0, "saturated": 0, "projection_active": 0,
                 "damped": 0, "sim_refused_commands": 0}
@@ -156,7 +185,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             series.add(t=meas.t, x=x, x_true=truth.true_pixels, x_d=res.x_d, x_obs=res.x_obs,
                        z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q, qd=truth.qd,
                        tau=res.tau,
-                       a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d)
+                       a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d,
+                       sigma_min_J_star=res.sigma_min, damped=float(res.damped))
             series.status.append(res.status)
             if recorder is not None:
                 recorder.record(meas, res, k % diag_every == 0 or res.status != last_status)
@@ -194,12 +224,19 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         if recorder is not None:
             recorder.close()
     data = series.view()
+    if diverged:
+        joints = list(scenario.sim.joint_names)
+        origin = divergence_origin(data, {"tau": joints, "qd": joints,
+                                          "a_z_perp": model.a_z_perp_labels,
+                                          "a_z": model.a_z_labels, "a_d": model.a_d_labels})
+        if origin is not None:
+            reason += f"; grew first: {origin[0]} at t={origin[1]:.3f} s"
     counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
     counters.update(detections.figures())
     summary = summarize(data, series.status, wall, diverged, reason, counters, period)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
-                   outputs=["summary.json", "timeseries.csv"])
+                   outputs=["summary.json", "timeseries.csv"], start_report=start)
     write_outputs(out_dir, data, series.status, model, summary, record, plots)
     return summary
 
@@ -215,14 +252,13 @@ class FrameDetections:
 
     def __init__(self, config):
         self.config = config
+        self.detector = None if config is None else config.detector()
         self.errors = []
         self.without_features = 0
         self.reasons = {}
 
     def detect(self, meas):
-        from .vision.detection import detect
-
-        found = detect(meas.image, self.config)
+        found = self.detector.detect(meas.image)
         if found.pixels is None:
             self.without_features += 1
             kind = found.reason.split(":")[0]
@@ -253,6 +289,9 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
         names = names or [str(i) for i in range(arr.shape[1])]
         columns += [f"{key}.{name}" for name in names]
         blocks.append(arr)
+    # sigma_min of J* and whether its pseudo-inverse was damped (NaN, 0 when not computed)
+    columns += ["sigma_min_J_star", "damped"]
+    blocks += [data["sigma_min_J_star"][:, None], data["damped"][:, None]]
     table = np.hstack(blocks)
     write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"],
               ([float(v) for v in row] + [s] for row, s in zip(table, status)))

@@ -56,7 +56,10 @@ class ParamSpec:
     of ``float``, ``int``, ``bool``, ``str``, ``float_list``, ``str_list``.
     ``low``/``high`` are inclusive bounds applied to every element.
     ``runtime`` marks parameters that may safely change while running;
-    ``structure`` those that define the model (read first).
+    ``structure`` those that define the model (read first).  ``optional``: the
+    value may be None (left out: derived later, e.g. a gain designed at the first
+    joint sample).  ``scalar``: a ``float_list`` that also takes one number, the
+    same for every entry (a diagonal gain); :func:`require_length` expands it.
     """
 
     name: str
@@ -67,6 +70,8 @@ class ParamSpec:
     high: float | None = None
     runtime: bool = False
     structure: bool = False
+    optional: bool = False
+    scalar: bool = False
 
     @property
     def computed(self):
@@ -80,6 +85,11 @@ class ParamSpec:
 def _to_value(spec, value, section):
     where = f"{section}.{spec.name}"
     kind = spec.kind
+    if value is None and spec.optional:
+        return None
+    if (kind == "float_list" and spec.scalar and not isinstance(value, bool)
+            and isinstance(value, (int, float, np.number))):
+        value = [value]             # one number for every entry: require_length expands it
     if kind == "str":
         if not isinstance(value, str):
             raise ConfigError(f"{where}: must be a string, got {value!r}")
@@ -106,6 +116,8 @@ def _to_value(spec, value, section):
             raise ConfigError(f"{where}: must be a list of strings, got {value!r}")
         return tuple(value)
     if kind == "float_list":
+        if isinstance(value, np.ndarray) and value.ndim != 1:
+            value = value.reshape(-1)
         if not isinstance(value, (list, tuple, np.ndarray)) or any(
                 isinstance(v, bool) or not isinstance(v, (int, float, np.number)) for v in value):
             raise ConfigError(f"{where}: must be a list of numbers, got {value!r}")
@@ -163,15 +175,25 @@ def resolve_params(specs, params, section, build_structure):
     return structure, values
 
 
-def require_length(values, name, length, section):
-    """``values[name]`` has ``length`` entries (ConfigError naming it otherwise)."""
+def require_length(values, name, length, section, scalar=False):
+    """``values[name]`` has ``length`` entries (ConfigError naming it otherwise).
+
+    With ``scalar``, one entry stands for all and is expanded in ``values``; None
+    (an optional parameter left out) passes.
+    """
+    if values[name] is None:
+        return
+    if scalar and len(values[name]) == 1 and length != 1:
+        arr = np.full(length, values[name][0])
+        arr.setflags(write=False)
+        values[name] = arr
     if len(values[name]) != length:
         raise ConfigError(f"{section}.{name}: needs {length} values, got {len(values[name])}")
 
 
 def require_finite(values, name, section):
     """Every entry of ``values[name]`` is finite (ConfigError naming it otherwise)."""
-    if not np.all(np.isfinite(values[name])):
+    if values[name] is not None and not np.all(np.isfinite(values[name])):
         raise ConfigError(f"{section}.{name}: must be finite")
 
 

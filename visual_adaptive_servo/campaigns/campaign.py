@@ -127,8 +127,11 @@ def _finished_ids(path, columns):
 
 
 @contextlib.contextmanager
-def exclusive(out_dir):
-    """Hold DIR/campaign.lock: two campaigns appending to one runs.csv would mix rows."""
+def exclusive(out_dir, command="vas campaign"):
+    """Hold DIR/campaign.lock: two campaigns appending to one runs.csv would mix rows.
+
+    ``command`` names the kind of job in the refusal (``vas tune`` holds the same lock).
+    """
     import fcntl
 
     os.makedirs(out_dir, exist_ok=True)
@@ -136,7 +139,7 @@ def exclusive(out_dir):
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise CampaignError(f"{out_dir} is in use by another vas campaign; wait for it "
+            raise CampaignError(f"{out_dir} is in use by another {command}; wait for it "
                                 "or use another --out") from None
         yield
 

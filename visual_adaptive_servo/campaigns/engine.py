@@ -84,12 +84,13 @@ class RunResult:
     wall_time_s: float
 
 
-def execute_run(run, keep_dir=None):
+def execute_run(run, keep_dir=None, figures=FIGURES):
     """The default run function: the run, headless; returns its :data:`FIGURES`.
 
     ``keep_dir``: keep each run's timeseries.csv and summary.json in
     ``keep_dir/<run index>`` (``vas compare`` plots from them); by default they go to
-    a scratch folder.
+    a scratch folder.  ``figures``: the summary.json keys to return (``vas tune`` also
+    reads the count of saturated samples).
     """
     from ..config.scenario import load_scenario
     from ..control.registry import controller_factory
@@ -104,7 +105,7 @@ def execute_run(run, keep_dir=None):
                                record=False, plots=False, controller_factory=factory)
     if summary.get("error"):
         raise RunFailed(summary["error"])
-    return {key: summary.get(key, math.nan) for key in FIGURES}
+    return {key: summary.get(key, math.nan) for key in figures}
 
 
 def describe(exc):

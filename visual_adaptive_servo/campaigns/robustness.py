@@ -42,10 +42,12 @@ BOUNDS = {
     "iiwa start 20 px off": 0.5, "iiwa start 50 px off": 0.5,
     "iiwa camera 30 Hz 33 ms late": 0.5, "panda start 20 px off": 0.5,
     "iiwa noise 0.5 px (noise gains)": 1.0, "panda noise 0.5 px (noise gains)": 1.0,
+    "iiwa AprilTag, a board crosses the tag 0.3 s (noise gains)": 1.0,
 }
 #: cases whose faults must reach the controller (rejected samples or refused frames)
 FAULT_CASES = ("NaN pixels 0.1 s", "NaN joint states 0.03 s",
-               "every 10th frame lost + 0.3 s outage", "rendered camera, marker hidden 0.3 s")
+               "every 10th frame lost + 0.3 s outage", "rendered camera, marker hidden 0.3 s",
+               "iiwa AprilTag, a board crosses the tag 0.3 s (noise gains)")
 
 
 def run_matrix(out_dir, workers=None, ray=None, duration=None, progress=None, spec=SPEC):

@@ -53,7 +53,8 @@ Factors (:data:`FACTOR_HELP`):
 * ``estimate_scale.<a_z_perp|a_z|a_d>``: initial estimate = the model's true
   parameters times the factor;
 * ``gain_scale.<K|alpha|gamma|Gamma_d|Gamma_z_perp|Gamma_z>``: the base gain times
-  the factor; ``trajectory.amplitude_scale`` (a_cos, a_sin) and
+  the factor (a gain the base leaves out is derived and then scaled, through
+  ``gain_design.scale.<gain>``); ``trajectory.amplitude_scale`` (a_cos, a_sin) and
   ``trajectory.frequency_scale`` (omega) likewise;
 * ``controller``: one of
   :data:`~visual_adaptive_servo.control.registry.CONTROLLER_NAMES`; ``base``: another
@@ -570,6 +571,9 @@ def resolve_overrides(factors, base):
             values[f"{CONTROLLER_SECTION}.{rest}_init"] = (getattr(model, rest) * value).tolist()
         elif prefix == "gain_scale":
             target = f"{CONTROLLER_SECTION}.{rest}"
+            if base_value(target) is None:
+                # a gain the base leaves to the design: scale what the design derives
+                target = f"{CONTROLLER_SECTION}.gain_design.scale.{rest}"
             values[target] = _scaled(base_value(target), value)
         elif key in TRAJECTORY_SCALES:
             for name in TRAJECTORY_SCALES[key]:

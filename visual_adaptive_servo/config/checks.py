@@ -35,6 +35,13 @@ def check_pair(sim, ctrl):
         raise ConfigError(f"controller_node.model: describes {model.n} joints and {model.m} "
                           f"point(s); the simulated arm (sim_node.urdf, feature_points) has "
                           f"{sim.arm.n} and {sim.arm.m}")
+    if sim.tag is not None and "feature_points" in ctrl.params and ctrl["model"] == "urdf":
+        if not np.allclose(ctrl["feature_points"], sim.arm.offsets.reshape(-1), rtol=0.0,
+                           atol=1e-6):
+            raise ConfigError(f"controller_node.feature_points: must be the tag's points "
+                              f"(sim_node.feature_points, markers.tag.*) "
+                              f"{sim.arm.offsets.reshape(-1).tolist()}, got "
+                              f"{list(ctrl['feature_points'])}")
     if tuple(ctrl.joint_names) != tuple(sim.joint_names):
         raise ConfigError(f"controller_node.joint_names: must equal sim_node.joint_names "
                           f"{list(sim.joint_names)}, got {list(ctrl.joint_names)}")

@@ -22,13 +22,14 @@ the desired trajectory x_d.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from sim_bridge.camera import PinholeCamera
 
 from ..control.controller import check_alpha_gamma
+from ..control.gain_design import DESIGNED, DesignSettings
 from ..control.trajectory import SinusoidTrajectory, TabulatedTrajectory, TRAJECTORY_TYPES
 from ..models import make_model, MODEL_NAMES, RobotCameraModel, STRUCTURE_PARAMS
 from ..models.resources import resolve_path
@@ -63,30 +64,79 @@ CONTROLLER_PARAMS = (
               "ROS node: QoS of the measurement subscriptions; must match sim_node.timing_mode "
               "(lockstep: reliable; realtime: best-effort sensor data)."),
     ParamSpec("sample_time", 0.005, "float", "Nominal control period T [s].", 1e-5, 1.0),
-    ParamSpec("K", lambda m, v: [0.001] * (2 * m.m), "float_list",
-              "Diagonal of the feedback gain K of eq (22), (2m,).", 0.0, None, True),
-    ParamSpec("joint_damping.inertia_rate", 0.0, "float",
+    ParamSpec("camera_rate", 30.0, "float",
+              "Frame rate of the camera as the controller should expect it [Hz] (0: a frame at "
+              "every joint sample); sets the derived bandwidths (gain_design.*).", 0.0, None),
+    ParamSpec("camera_latency", 0.05, "float",
+              "Latency of the camera, capture to arrival, as the controller should expect it "
+              "[s]; sets the derived bandwidths.", 0.0, 10.0),
+    ParamSpec("gain_design.delay_bandwidth", 0.15, "float",
+              "Derived gamma = this / tau, tau = sample_time + camera_latency + 1/(2 camera_rate) "
+              "(the loop's bandwidth times its delay, rad).", 1e-3, 1.0),
+    ParamSpec("gain_design.gamma_max", 20.0, "float", "Largest derived gamma [1/s].", 1e-3, None),
+    ParamSpec("gain_design.observer_ratio", 2.0, "float",
+              "Derived alpha = this x gamma (Theorem 1 needs > 1/3).", 0.34, 100.0),
+    ParamSpec("gain_design.damping_per_sample", 0.2, "float",
+              "Derived joint_damping.inertia_rate = this / sample_time: the per-sample step "
+              "of the damped velocity loop (oscillates past 1, diverges past 2).", 0.0, 1.0),
+    ParamSpec("gain_design.K_fraction", 0.05, "float",
+              "Derived K: the largest scalar with J*^T K J* <= this x the joint damping at the "
+              "first sample.", 1e-9, 1.0),
+    ParamSpec("gain_design.kinematic_rate", 0.1, "float",
+              "Derived Gamma_z_perp, Gamma_z: the kinematic estimates converge at this x gamma "
+              "(regressor-normalised, docs/gain_design.md).", 0.0, 10.0),
+    ParamSpec("gain_design.dynamic_rate", 0.3, "float",
+              "Derived Gamma_d: the dynamic estimates converge at this x gamma.", 0.0, 10.0),
+    *(ParamSpec(f"gain_design.scale.{name}", 1.0, "float",
+                f"The derived {name} times this (when {name} is left out).", 0.0, None)
+      for name in DESIGNED),
+    ParamSpec("K", None, "float_list",
+              "Diagonal of the feedback gain K of eq (22), (2m,) or one number; left out: "
+              "derived at the first joint sample (gain_design.K_fraction).", 0.0, None, True,
+              optional=True, scalar=True),
+    ParamSpec("joint_damping.inertia_rate",
+              lambda m, v: v["gain_design.damping_per_sample"] / v["sample_time"], "float",
               "Joint-space damping of s, D = rate x (estimated inertia matrix at the start), "
-              "added to eq (22) [1/s]; 0 = the paper's law.  Keeps Theorem 1 (see README).",
-              0.0, None),
+              "added to eq (22) [1/s]; 0 = the paper's law.  Keeps Theorem 1 (see README).  "
+              "Default: gain_design.damping_per_sample / sample_time.", 0.0, None),
     ParamSpec("joint_damping.diagonal", lambda m, v: [0.0] * m.n, "float_list",
-              "A constant diagonal added to that damping [N m s/rad].", 0.0, None),
-    ParamSpec("alpha", 10.0, "float", "Observer gain alpha of eq (10); alpha > gamma/3.",
-              0.0, None),
-    ParamSpec("gamma", 10.0, "float", "Reference gain gamma of eq (18); alpha > gamma/3.",
-              0.0, None),
-    ParamSpec("Gamma_d_normalized", 300.0, "float",
-              "Default of Gamma_d: this divided by the square of each Y_d column's typical size, "
-              "so every parameter adapts like one with an O(1) column.", 0.0, None),
-    ParamSpec("Gamma_d", lambda m, v: list(v["Gamma_d_normalized"]
-                                           / np.maximum(m.dynamic_column_rms(), 0.1) ** 2),
+              "A constant diagonal added to that damping [N m s/rad].", 0.0, None,
+              scalar=True),
+    ParamSpec("gamma", lambda m, v: DesignSettings.from_values(v).bandwidths()[1], "float",
+              "Reference gain gamma of eq (18); alpha > gamma/3.  Default: "
+              "min(gain_design.gamma_max, gain_design.delay_bandwidth / tau).", 0.0, None),
+    ParamSpec("alpha", lambda m, v: v["gain_design.observer_ratio"] * v["gamma"], "float",
+              "Observer gain alpha of eq (10); alpha > gamma/3.  Default: "
+              "gain_design.observer_ratio x gamma.", 0.0, None),
+    ParamSpec("reference.integral_rate", 0.0, "float",
+              "Integral action in the reference velocity (not in the paper): x_r_dot = x_d_dot - "
+              "gamma e - kappa int e, kappa = this x gamma^2; 0 = eq (18) "
+              "(docs/robust_adaptation.md).", 0.0, 1.0),
+    ParamSpec("robust.leakage_kinematic", 0.0, "float",
+              "sigma-modification of eqs (24), (25) (not in the paper): a_hat_dot -= this x "
+              "(a_hat - a_hat(0)) [1/s]; 0 = the paper's laws (docs/robust_adaptation.md).",
+              0.0, None, True),
+    ParamSpec("robust.leakage_dynamic", 0.0, "float",
+              "The same for eq (23) [1/s].", 0.0, None, True),
+    ParamSpec("Gamma_d_normalized", None, "float",
+              "Gamma_d = this divided by the square of each Y_d column's typical size over "
+              "random states (left out: Gamma_d derived at the first joint sample).", 0.0, None,
+              optional=True),
+    ParamSpec("Gamma_d", lambda m, v: (None if v["Gamma_d_normalized"] is None else
+                                       list(v["Gamma_d_normalized"]
+                                            / np.maximum(m.dynamic_column_rms(), 0.1) ** 2)),
               "float_list",
-              "Diagonal of the dynamic adaptation gain Gamma_d of eq (23) (default from "
-              "Gamma_d_normalized).", 0.0, None, True),
-    ParamSpec("Gamma_z_perp", lambda m, v: [600.0] * m.p_perp, "float_list",
-              "Diagonal of Gamma_z_perp of eq (24).", 0.0, None, True),
-    ParamSpec("Gamma_z", lambda m, v: [0.2] * m.p_z, "float_list",
-              "Diagonal of Gamma_z of eq (25).", 0.0, None, True),
+              "Diagonal of the dynamic adaptation gain Gamma_d of eq (23), or one number; left "
+              "out: from Gamma_d_normalized, or derived at the first joint sample "
+              "(gain_design.dynamic_rate).", 0.0, None, True, optional=True, scalar=True),
+    ParamSpec("Gamma_z_perp", None, "float_list",
+              "Diagonal of Gamma_z_perp of eq (24), or one number; left out: derived at the "
+              "first joint sample (gain_design.kinematic_rate).", 0.0, None, True,
+              optional=True, scalar=True),
+    ParamSpec("Gamma_z", None, "float_list",
+              "Diagonal of Gamma_z of eq (25), or one number; left out: derived at the first "
+              "joint sample (gain_design.kinematic_rate).", 0.0, None, True, optional=True,
+              scalar=True),
 ) + camera_specs("initial_estimate.camera.", "Guessed camera for the initial estimates") + (
     ParamSpec("initial_estimate.length_scale", 1.0, "float",
               "Initial estimates: the model's nominal lengths times this.", 1e-3, 1e3),
@@ -119,21 +169,28 @@ CONTROLLER_PARAMS = (
     ParamSpec("projection.enabled", True, "bool",
               "Project the kinematic adaptation (Remark 6) onto the bounds below."),
     ParamSpec("projection.a_z_perp_min", lambda m, v: [-INF] * m.p_perp, "float_list",
-              "Lower bounds of a_z_perp_hat."),
+              "Lower bounds of a_z_perp_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.a_z_perp_max", lambda m, v: [INF] * m.p_perp, "float_list",
-              "Upper bounds of a_z_perp_hat."),
+              "Upper bounds of a_z_perp_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.a_z_min", lambda m, v: [-INF] * m.p_z, "float_list",
-              "Lower bounds of a_z_hat."),
+              "Lower bounds of a_z_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.a_z_max", lambda m, v: [INF] * m.p_z, "float_list",
-              "Upper bounds of a_z_hat."),
+              "Upper bounds of a_z_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.a_d_min", lambda m, v: [-INF] * m.p_d, "float_list",
-              "Lower bounds of a_d_hat."),
+              "Lower bounds of a_d_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.a_d_max", lambda m, v: [INF] * m.p_d, "float_list",
-              "Upper bounds of a_d_hat."),
+              "Upper bounds of a_d_hat (or one number for all).",
+              scalar=True),
     ParamSpec("projection.min_depth", 0.1, "float",
               "Smallest allowed estimated depth z_hat_i [m].", 1e-6, None),
     ParamSpec("torque_limit", lambda m, v: [INF] * m.n, "float_list",
-              "Per-joint |tau| limit [N m]; the command saturates there.", 0.0, None, True),
+              "Per-joint |tau| limit [N m], or one number; the command saturates there.", 0.0,
+              None, True, scalar=True),
     ParamSpec("min_singular_value", 0.0, "float",
               "Damp the pseudo-inverse of J* when its smallest singular value drops below "
               "this [px m/rad]; 0 = never.", 0.0, None, True),
@@ -198,6 +255,7 @@ class ControllerConfig(ValidatedParams):
     model: RobotCameraModel = None
     trajectory: object = None
     search_dirs: tuple = ()
+    explicit: frozenset = frozenset()   # the parameters the configuration gave
 
     @property
     def model_name(self):
@@ -218,8 +276,9 @@ class ControllerConfig(ValidatedParams):
                    "projection.a_z_perp_max": model.p_perp, "projection.a_z_min": model.p_z,
                    "projection.a_z_max": model.p_z, "projection.a_d_min": model.p_d,
                    "projection.a_d_max": model.p_d, "torque_limit": model.n}
+        scalar = {spec.name for spec in CONTROLLER_PARAMS if spec.scalar}
         for name, length in lengths.items():
-            require_length(v, name, length, section)
+            require_length(v, name, length, section, name in scalar)
         require_length(v, "joint_names", model.n, section)
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
@@ -227,8 +286,8 @@ class ControllerConfig(ValidatedParams):
         for name in ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z", "a_z_perp_init", "a_z_init",
                      "a_d_init", "trajectory.offset", "trajectory.a_cos", "trajectory.a_sin"):
             require_finite(v, name, section)
-        for name in ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z"):
-            if np.any(v[name] <= 0.0):
+        for name in DESIGNED:
+            if v[name] is not None and np.any(v[name] <= 0.0):
                 raise ConfigError(f"{section}.{name}: every entry must be > 0 "
                                   f"(a positive definite gain), got {list(v[name])}")
         for name in ("alpha", "gamma"):
@@ -252,14 +311,15 @@ class ControllerConfig(ValidatedParams):
                 raise ConfigError(f"{section}.{name}_init: must lie within "
                                   f"projection.{name}_min/_max, got {list(init)}")
         trajectory = _trajectory(v, model.m, section, search_dirs)
-        return cls(v, model, trajectory, tuple(search_dirs))
+        return cls(v, model, trajectory, tuple(search_dirs), frozenset(params))
 
     def with_changes(self, **changes):
         """A new, whole-validated configuration with some parameters changed (same model)."""
-        params = dict(self.params)
+        params = {name: value for name, value in self.params.items() if value is not None}
         params.update(changes)
-        return ControllerConfig.from_params(params, search_dirs=self.search_dirs,
-                                            model=self.model)
+        new = ControllerConfig.from_params(params, search_dirs=self.search_dirs,
+                                           model=self.model)
+        return replace(new, explicit=self.explicit | frozenset(changes))
 
 
 def _trajectory(v, m, section, search_dirs):

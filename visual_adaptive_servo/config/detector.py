@@ -27,7 +27,17 @@ from ..vision.detection import DetectorConfig
 from .common import MARKER_COLORS
 
 
+DETECTOR_TYPES = ("color", "apriltag")
+
 DETECTOR_PARAMS = (
+    ParamSpec("type", "color", "str",
+              "color: one coloured blob per feature point (markers.*); apriltag: the corners "
+              "or centre of one AprilTag (tag.*)."),
+    ParamSpec("tag.family", "36h11", "str", "AprilTag family (16h5, 25h9, 36h10, 36h11)."),
+    ParamSpec("tag.id", 0, "int", "The tag's id in its family.", 0, None),
+    ParamSpec("tag.points", ["top_left", "top_right", "bottom_right"], "str_list",
+              "The feature points in feature order (1 to 3): top_left, top_right, "
+              "bottom_right, bottom_left (the black square's corners as printed), center."),
     ParamSpec("markers.colors", list(MARKER_COLORS[:3]), "float_list",
               "Marker colours as the camera sees them, RGB 0-255, three values per marker "
               "(1 to 3 markers), in feature order (default: the simulator's first marker).",
@@ -66,6 +76,14 @@ def detector_config(params):
     if v["timing_mode"] not in TIMING_MODES:
         raise ConfigError(f"{DETECTOR_SECTION}.timing_mode: must be one of {TIMING_MODES}, "
                           f"got {v['timing_mode']!r}")
+    if v["type"] not in DETECTOR_TYPES:
+        raise ConfigError(f"{DETECTOR_SECTION}.type: must be one of {DETECTOR_TYPES}, got "
+                          f"{v['type']!r}")
+    if v["type"] == "apriltag":
+        from ..vision.apriltag import TagDetectorConfig
+
+        return TagDetectorConfig(v["tag.family"], v["tag.id"], tuple(v["tag.points"]),
+                                 v["pixel_origin"], v["pixel_axes"])
     return DetectorConfig(v["markers.colors"], v["markers.tolerance"], v["blob_area"],
                           v["pixel_origin"], v["pixel_axes"])
 
@@ -78,5 +96,8 @@ def detector_for(sim, params=None):
     base = {"markers.colors": [float(v) for v in sim["markers.colors"]],
             "pixel_origin": [float(v) for v in sim.camera.pixel_origin],
             "pixel_axes": [float(v) for v in sim.camera.pixel_axes]}
+    if sim.tag is not None:
+        base.update({"type": "apriltag", "tag.family": sim.tag.family, "tag.id": sim.tag.tag_id,
+                     "tag.points": list(sim.tag.points)})
     base.update(params or {})
     return detector_config(base)

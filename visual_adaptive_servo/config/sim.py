@@ -21,13 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..models.resources import resolve_path
+from ..models.tag import DEFAULT_POINTS, FAMILIES, TagPlate
 from ..models.urdf_arm import check_feature_points
 from ..models.urdf_chain import load_chain
+from ..models.urdf_checks import check_urdf
 from ..schema import (ConfigError, ParamSpec, require_finite, require_length, resolve_params,
                       SIM_SECTION, TIMING_MODES, ValidatedParams)
 from .common import build_camera, camera_specs, MARKER_COLORS, PAPER_URDF, structure_specs
 
 CAMERA_MODES = ("points", "rendered")
+MARKER_TYPES = ("balls", "apriltag")
 
 
 SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], "") + (
@@ -59,6 +62,46 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
               "Radius of the coloured sphere drawn at each feature point [m].", 1e-4, 1.0),
     ParamSpec("markers.colors", lambda s, v: list(MARKER_COLORS[:3 * s.m]), "float_list",
               "RGB 0-255 of each feature point's marker, 3 numbers per point.", 0.0, 255.0),
+    ParamSpec("markers.type", "balls", "str",
+              "balls: a coloured sphere at each feature point; apriltag: a printed AprilTag "
+              "on a plate on the tip link (markers.tag.*), whose corners or centre are the "
+              "feature points (feature_points must be the tag's points)."),
+    ParamSpec("markers.tag.family", "36h11", "str",
+              f"AprilTag family, one of {list(FAMILIES)}."),
+    ParamSpec("markers.tag.id", 0, "int", "The tag's id in its family.", 0, None),
+    ParamSpec("markers.tag.edge", 0.1, "float",
+              "Side of the tag's black square (the AprilTag tag size) [m].", 1e-3, 10.0),
+    ParamSpec("markers.tag.margin", 1.0, "float",
+              "White border of the plate around the black square [cells].", 1.0, 10.0),
+    ParamSpec("markers.tag.position", [0.0, 0.0, 0.0], "float_list",
+              "Centre of the tag in the tip link frame [m]."),
+    ParamSpec("markers.tag.rpy", [0.0, 0.0, 0.0], "float_list",
+              "Orientation of the tag frame (X right and Y up in the printed tag, Z out of "
+              "its face) in the tip link frame, URDF roll-pitch-yaw [rad]."),
+    ParamSpec("markers.tag.points", lambda s, v: list(DEFAULT_POINTS[s.m]), "str_list",
+              "The feature points in feature order: top_left, top_right, bottom_right, "
+              "bottom_left (corners of the black square as printed), center (default: the "
+              "centre for m = 1, a diagonal for m = 2, three corners for m = 3)."),
+    ParamSpec("picture.surroundings", False, "bool",
+              "Rendered pictures: a textured floor and boxes behind the arm."),
+    ParamSpec("picture.shading", False, "bool",
+              "Rendered pictures: directional light with diffuse and specular shading "
+              "(false: flat colours, as the colour-ball detector expects)."),
+    ParamSpec("picture.exposure", 0.0, "float",
+              "Rendered pictures: exposure time ending at the capture, for motion blur [s]; "
+              "0 = none.", 0.0, 1.0),
+    ParamSpec("picture.exposure_samples", 3, "int",
+              "Rendered pictures: pictures averaged over the exposure (each a rendering).",
+              1, 16),
+    ParamSpec("picture.read_noise", 0.0, "float",
+              "Rendered pictures: Gaussian read noise, std as a fraction of full scale.",
+              0.0, 0.5),
+    ParamSpec("picture.shot_noise", 0.0, "float",
+              "Rendered pictures: shot noise, std sqrt(I) x this on the intensity I in [0, 1].",
+              0.0, 0.5),
+    ParamSpec("picture.gamma", 1.0, "float",
+              "Rendered pictures: gamma, the picture is I^(1/gamma) after the noise; 1 = linear.",
+              0.2, 5.0),
     ParamSpec("faults.nan_pixels", [0.0, 0.0], "float_list",
               "Fault injection: frames captured in [start, start + length] carry NaN pixels "
               "[s, s]; length 0 = off.", 0.0, None),
@@ -144,11 +187,43 @@ def build_sim_arm(values, section=SIM_SECTION, search_dirs=()):
     """The simulator's arm (URDF chain and feature offsets) from the structure parameters."""
     path = resolve_path(values["urdf"], search_dirs, f"{section}.urdf")
     chain = load_chain(path, values["base_link"], values["tip_link"], section)
+    check_urdf(path, chain.joint_names, section, simulator=True)
     points = np.asarray(values["feature_points"], dtype=float)
     if points.size == 0 or points.size % 3:
         raise ValueError(f"{section}.feature_points: 3 numbers per point, got {points.size}")
     check_feature_points(points.reshape(-1, 3), chain.n, section)
     return SimArm(chain, points.reshape(-1, 3))
+
+
+def tag_plate(v, arm, section=SIM_SECTION):
+    """The :class:`TagPlate` of ``markers.tag.*`` (None for balls); its points must be the arm's.
+
+    ``feature_points`` are checked against the tag's points here, so that the model and
+    the picture cannot disagree: the error gives the values to write.
+    """
+    if v["markers.type"] not in MARKER_TYPES:
+        raise ConfigError(f"{section}.markers.type: must be one of {MARKER_TYPES}, got "
+                          f"{v['markers.type']!r}")
+    if v["markers.type"] != "apriltag":
+        return None
+    for name in ("markers.tag.position", "markers.tag.rpy"):
+        require_length(v, name, 3, section)
+    if len(v["markers.tag.points"]) != arm.m:
+        raise ConfigError(f"{section}.markers.tag.points: needs one name per feature point "
+                          f"({arm.m}), got {list(v['markers.tag.points'])}")
+    try:
+        plate = TagPlate(v["markers.tag.family"], v["markers.tag.id"], v["markers.tag.edge"],
+                         tuple(v["markers.tag.position"]), tuple(v["markers.tag.rpy"]),
+                         tuple(v["markers.tag.points"]), v["markers.tag.margin"])
+    except ValueError as exc:
+        raise ConfigError(f"{section}.markers.{exc}") from None
+    expected = plate.feature_points()
+    if not np.allclose(arm.offsets, expected, rtol=0.0, atol=1e-6):
+        values = ", ".join(f"{c:.6g}" for c in expected.reshape(-1))
+        raise ConfigError(f"{section}.feature_points: must be the tag's points "
+                          f"{list(plate.points)} (markers.tag.*) in the tip frame, "
+                          f"[{values}]; got {arm.offsets.reshape(-1).tolist()}")
+    return plate
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,6 +232,7 @@ class SimConfig(ValidatedParams):
 
     arm: SimArm = None
     camera: object = None       # sim_bridge.camera.PinholeCamera
+    tag: object = None          # models.tag.TagPlate with markers.type apriltag
 
     @classmethod
     def from_params(cls, params, section=SIM_SECTION, search_dirs=()):
@@ -194,7 +270,7 @@ class SimConfig(ValidatedParams):
                                   f"publishes there) nor the command topic, got "
                                   f"{v['hardware.state_topic']!r}")
         camera = build_camera(v, "camera.", section)
-        return cls(v, arm, camera)
+        return cls(v, arm, camera, tag_plate(v, arm, section))
 
     @property
     def substeps(self):

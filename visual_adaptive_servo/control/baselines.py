@@ -158,7 +158,7 @@ class VelocityAdaptiveTracker(AdaptiveVisualTracker):
             self._last_pixels = self._pending
         return result
 
-    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
+    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int=None):
         v = self.velocity(t, x)
         self._pending = (t, x, v)
         return velocity_law(self.model, self.gains, state, q, qd, x, v, xd, xd_dot, xd_ddot,
@@ -228,7 +228,7 @@ class CalibratedIBVS(AdaptiveVisualTracker):
         self.state = EstimatorState(np.zeros(2 * m.m), m.a_z_perp.copy(), m.a_z.copy(),
                                     m.a_d.copy())
 
-    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
+    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int=None):
         return ibvs_law(self.model, q, qd, x, xd, xd_dot, xd_ddot, self.ibvs_gains,
                         self.config["min_singular_value"], tensors)
 

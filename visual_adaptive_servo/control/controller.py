@@ -37,6 +37,8 @@ from math import isfinite, sqrt
 import numpy as np
 
 from ..schema import CONTROLLER_SECTION, ConfigError
+from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
+                          sampled_data_margin)
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
@@ -48,6 +50,22 @@ def check_alpha_gamma(alpha, gamma, section=CONTROLLER_SECTION):
     if not alpha > gamma / 3.0:
         raise ConfigError(f"{section}.alpha: Theorem 1 requires alpha > gamma/3, got "
                           f"alpha={alpha} and gamma={gamma} (gamma/3={gamma / 3.0:.6g})")
+
+
+@dataclass(frozen=True)
+class Leakage:
+    """sigma-modification of eqs (23)-(25) toward the initial estimates (not in the paper).
+
+    a_hat_dot = (paper's rate) - sigma (a_hat - a_hat(0)): an estimate the errors no
+    longer drive decays back to the initial guess at the rate sigma [1/s], so pixel
+    noise cannot make it drift without bound (docs/robust_adaptation.md).
+    """
+
+    kinematic: float
+    dynamic: float
+    a_z_perp0: np.ndarray
+    a_z0: np.ndarray
+    a_d0: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -66,6 +84,7 @@ class Gains:
     Gamma_z_perp: np.ndarray
     Gamma_z: np.ndarray
     D: np.ndarray | None = None
+    leakage: Leakage | None = None
 
     def __post_init__(self):
         check_alpha_gamma(self.alpha, self.gamma)
@@ -194,7 +213,7 @@ class Projection:
 
 
 def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=None,
-                min_singular_value=0.0, tensors=None):
+                min_singular_value=0.0, tensors=None, integral=None):
     """Evaluate the paper's controller at one instant.
 
     Parameters
@@ -213,6 +232,10 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         Below this smallest singular value of J*, use a damped pseudo-inverse.
     tensors : tuple, optional
         ``model.kinematic_tensors(q, qd)`` if the caller has computed it already.
+    integral : (kappa, e_int) or None
+        The reference's integral action (docs/robust_adaptation.md, not in the
+        paper): x_r_dot = x_d_dot - gamma (x_o - x_d) - kappa e_int with
+        e_int_dot = x_o - x_d; None is the paper's eq (18).
 
     Returns
     -------
@@ -245,6 +268,10 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     x_obs_dot = x_obs_model - gains.alpha * dx_obs
     x_r_dot = xd_dot - gains.gamma * e_obs
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
+    if integral is not None:
+        kappa, e_int = integral
+        x_r_dot = x_r_dot - kappa * e_int
+        x_r_ddot = x_r_ddot - kappa * e_obs
 
     # eq (24)
     a_perp_dot = gains.Gamma_z_perp * (dx - dx_obs).dot(qd.dot(W))  # Y_z_perp = qd . W
@@ -258,6 +285,10 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     w_H = x_obs_model * dx_obs - x_r_dot * dx
     w_H_rate = x_mid * dx_obs - u * dx
     a_z_dot = gains.Gamma_z * (w_H.dot(H2) + w_H_rate.dot(H2_rate))
+    leak = gains.leakage
+    if leak is not None and leak.kinematic > 0.0:
+        a_perp_dot = a_perp_dot - leak.kinematic * (state.a_z_perp - leak.a_z_perp0)
+        a_z_dot = a_z_dot - leak.kinematic * (state.a_z - leak.a_z0)
 
     u_dot = 0.5 * (x_obs_dot + xd_dot)
     return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
@@ -347,6 +378,8 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
         # the image-space K cannot give it without destabilising the heavy ones
         tau = tau - gains.D.dot(s)
     a_d_dot = gains.Gamma_d * (qr_dot - qd).dot(Y_d)  # eq (23): -Gamma_d Y_d^T s
+    if gains.leakage is not None and gains.leakage.dynamic > 0.0:
+        a_d_dot = a_d_dot - gains.leakage.dynamic * (state.a_d - gains.leakage.a_d0)
     if projection is not None:
         a_d_dot, active_d = projection.dynamic_rate(state.a_d, a_d_dot)
         projection_active = projection_active or active_d
@@ -401,6 +434,46 @@ class StepResult:
     flags: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class StartReport:
+    """What :meth:`AdaptiveVisualTracker.start_report` found at the start pose."""
+
+    n: int
+    m: int
+    p_perp: int
+    p_z: int
+    p_d: int
+    gains: dict                 # the gains in effect
+    derived: tuple              # the names of those derived at the start (gain_design.py)
+    sigma_min: float            # of the estimated J(q0, x_d(0)) [px m/rad]
+    sigma_max: float
+    z_hat: np.ndarray           # estimated depths at q0 [m]
+    margin: float               # largest eigenvalue of T M_hat^-1 B
+    margin_joint: np.ndarray    # T B_jj / M_hat_jj per joint
+    joint_names: tuple
+
+    def lines(self):
+        """The report as text lines."""
+        def describe(value):
+            arr = np.atleast_1d(np.asarray(value, dtype=float))
+            if arr.size == 1 or np.all(arr == arr[0]):
+                return f"{arr[0]:.4g}" + (f" (x{arr.size})" if arr.size > 1 else "")
+            return f"{arr.min():.3g}..{arr.max():.3g} ({arr.size} entries)"
+        out = [f"n = {self.n} joints, m = {self.m} points; parameters: a_z_perp {self.p_perp}, "
+               f"a_z {self.p_z}, a_d {self.p_d}"]
+        for name, value in self.gains.items():
+            source = "derived" if name in self.derived else "given"
+            out.append(f"{name} = {describe(value)} ({source})")
+        out.append(f"estimated J(q0, x_d(0)): sigma_min {self.sigma_min:.4g}, sigma_max "
+                   f"{self.sigma_max:.4g} px m/rad")
+        out.append("estimated depths: " + ", ".join(f"{z:.3f}" for z in self.z_hat.tolist())
+                   + " m")
+        out.append(f"sampled-data step (T M_hat^-1 B): {self.margin:.3g}; per joint "
+                   + ", ".join(f"{n} {r:.3g}" for n, r in zip(self.joint_names,
+                                                           self.margin_joint.tolist())))
+        return out
+
+
 class InputError(ValueError):
     """A measurement was refused; the message names the input and the problem."""
 
@@ -453,9 +526,10 @@ class AdaptiveVisualTracker:
         self.config = config
         self.model = config.model
         self.trajectory = config.trajectory
-        self.gains = Gains(config.K, config.alpha, config.gamma, config.Gamma_d,
-                           config.Gamma_z_perp, config.Gamma_z)
+        self.designed = {}          # gains derived at the first joint sample (gain_design.py)
+        self.gains = None           # complete once every gain is known (see reset)
         self.damping = None         # D of the joint-space damping, fixed at the first sample
+        self.report = None          # the start-up report (start_report), at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
@@ -473,6 +547,7 @@ class AdaptiveVisualTracker:
         self.state = EstimatorState(np.zeros(2 * self.model.m), np.array(c.a_z_perp_init),
                                     np.array(c.a_z_init), np.array(c.a_d_init))
         self.rates = None
+        self.e_int = np.zeros(2 * self.model.m)   # integral of x_o - x_d (reference.integral)
         self.desired = None
         self.t_last = None          # time of the last accepted sample
         self.t_last_feature = None  # time of the last valid feature
@@ -481,7 +556,11 @@ class AdaptiveVisualTracker:
         self.stale = False
         self._rejecting = ()        # kinds of problem of the current rejection streak
         self.damping = None
-        self.gains = replace(self.gains, D=None)
+        # complete before the first sample when the configuration gives every gain (D comes
+        # at the first sample); otherwise once the missing ones are derived there
+        self.designed = {}
+        self.gains = (self._gains(np.zeros((self.model.n, self.model.n)))
+                      if all(c[name] is not None for name in DESIGNED) else None)
         self._model_rate = None
         self.predictor.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
@@ -491,8 +570,9 @@ class AdaptiveVisualTracker:
         """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
         new_config = self.config.with_changes(**changes)
         self.config = new_config
-        self.gains = Gains(new_config.K, new_config.alpha, new_config.gamma, new_config.Gamma_d,
-                           new_config.Gamma_z_perp, new_config.Gamma_z, self.gains.D)
+        if self.gains is not None:
+            self.gains = self._gains(self.damping if self.damping is not None
+                                     else np.zeros((self.model.n, self.model.n)))
 
     def desired_at(self, t):
         if self.desired is None:
@@ -542,7 +622,10 @@ class AdaptiveVisualTracker:
         except InputError as exc:
             return self._reject(t, None, None, [str(exc)])
         if self.damping is None:
-            self._fix_damping(q)
+            try:
+                self._design(q)
+            except (ConfigError, np.linalg.LinAlgError) as exc:
+                return self._reject(t, q, qd, [f"start: {exc}"])
         problems, frame, stamp = [], None, t
         if x is None and not self.compensate:
             problems.append("feature x: missing")
@@ -628,8 +711,10 @@ class AdaptiveVisualTracker:
     def _sample(self, t, q, qd, x, tensors, with_frame):
         """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit."""
         restarting = self.t_last is None or self.stale
+        e_int = self.e_int
         if restarting:
             state = replace(self.state, x_obs=x.copy())
+            e_int = np.zeros_like(e_int)
             blend = (self.config.start_blend_time if self.t_last is None
                      else self.config["safety.recovery_blend_time"])
             desired = BlendedStart.from_measurement(self.trajectory, x, t, blend,
@@ -638,6 +723,8 @@ class AdaptiveVisualTracker:
             desired = self.desired
             dt = min(t - self.t_last, self.config["max_dt"])
             state = self.state.advanced(self.rates, dt)
+            if self._integral:
+                e_int = e_int + dt * (self.state.x_obs - self._xd_last)
         projection = self.projection
         if projection is not None:
             if projection.interior(state, tensors[0]):
@@ -648,7 +735,7 @@ class AdaptiveVisualTracker:
 
         xd, xd_dot, xd_ddot = desired(t)
         try:
-            out = self._law(t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection)
+            out = self._law(t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int)
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
                                            "its pseudo-inverse; state kept)"])
@@ -665,6 +752,7 @@ class AdaptiveVisualTracker:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
         self.desired = desired
         self.state, self.rates, self.t_last = state, out.rates, t
+        self.e_int, self._xd_last = e_int, xd
         if with_frame:
             self.t_last_feature = t
         self.stale = False
@@ -675,38 +763,136 @@ class AdaptiveVisualTracker:
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
 
-    def _fix_damping(self, q):
-        """D = c M_hat(q0) + diag(d) from ``joint_damping.*``, at the first valid joint sample.
+    def _design(self, q):
+        """Fix the joint damping and derive the gains left out, at the first valid joint sample.
 
-        M_hat is the inertia matrix of the initial dynamic estimate at the start pose
-        (from the model's own regressor), made positive definite (eigenvalues floored
-        at 1e-6 of the largest): with D = c M_hat, D T M^-1 is about c T for every
-        mode of the arm, so one rate c suits a heavy shoulder and a light wrist alike.
+        D = c M_hat(q0) + diag(d) from ``joint_damping.*``: M_hat is the inertia matrix
+        of the initial dynamic estimate at the start pose (from the model's own
+        regressor), made positive definite (eigenvalues floored at 1e-6 of the
+        largest): with D = c M_hat, D T M^-1 is about c T for every mode of the arm,
+        so one rate c suits a heavy shoulder and a light wrist alike.  K and the
+        adaptation gains the configuration leaves out follow from the arm
+        (:func:`~.gain_design.design_gains`); the sampled-data margin of the
+        velocity loop is checked (:meth:`start_report`).
         """
-        c = self.config["joint_damping.inertia_rate"]
-        d = np.asarray(self.config["joint_damping.diagonal"], dtype=float)
-        D = np.diag(d)
+        config = self.config
+        c = config["joint_damping.inertia_rate"]
+        D = np.diag(np.asarray(config["joint_damping.diagonal"], dtype=float))
+        M_hat = self.model.estimated_mass_matrix(q, self.state.a_d)
         if c > 0.0:
-            M_hat = self.model.estimated_mass_matrix(q, self.state.a_d)
-            w, V = np.linalg.eigh(0.5 * (M_hat + M_hat.T))
+            w = np.linalg.eigvalsh(0.5 * (M_hat + M_hat.T))
             if w[0] <= 1e-6 * max(w[-1], 0.0):
                 log.warning("joint_damping: the initial dynamic estimate's inertia matrix is not "
                             "positive definite at the start (eigenvalues %s); %s", w,
                             "floored" if w[-1] > 0.0 else "the inertia-shaped damping is off")
-            if w[-1] > 0.0:
-                D = D + c * (V * np.maximum(w, 1e-6 * w[-1])) @ V.T
-        self.damping = D
-        if np.any(D):
-            self.gains = replace(self.gains, D=D)
+            D = D + c * positive_definite(M_hat)
+        missing = [name for name in DESIGNED if config[name] is None]
+        designed = {}
+        if missing:
+            derived = design_gains(self.model, DesignSettings.from_values(config), self.state, q,
+                                   self.trajectory, D, config.alpha, config.gamma)
+            if "Gamma_d" in missing and derived.Gamma_d is None:
+                raise ConfigError(f"{CONTROLLER_SECTION}.Gamma_d: cannot be derived without a "
+                                  "joint damping (joint_damping.* is zero): give Gamma_d or "
+                                  "Gamma_d_normalized")
+            designed = {name: getattr(derived, name) * config[f"gain_design.scale.{name}"]
+                        for name in missing}
+        gains = self._gains(D, designed)
+        report = self.start_report(q, M_hat, gains)       # raises before anything is kept
+        self.damping, self.designed, self.gains, self.report = D, designed, gains, report
 
-    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection):
+    def start(self, q):
+        """Fix the damping and the gains at joint positions ``q`` now (else at the first sample).
+
+        Raises ConfigError when the configuration cannot run from q: a feature point
+        lies behind the guessed camera, the sampled-data margin is gone, or a gain
+        cannot be derived.
+        """
+        q = validate_vector("joint positions q", q, self.model.n)
+        self._design(q)
+        return self.report
+
+    def start_report(self, q, M_hat, gains):
+        """What the controller starts with at q: the start-up report (also logged).
+
+        Refuses (ConfigError) an estimate under which a point lies behind the camera
+        or closer than ``projection.min_depth``, and a velocity loop whose sampled-data
+        step T M_hat^-1 B reaches 2 (B = D + J*^T K J* + gamma M_hat, the velocity
+        feedback of eqs (19), (22)); warns past 1.
+        """
+        config, model, g = self.config, self.model, gains
+        H, dH, _, W, _ = model.kinematic_tensors(q, np.zeros(model.n))
+        z_hat = H.dot(self.state.a_z)
+        behind = [i for i, z in enumerate(z_hat.tolist()) if not z > config["projection.min_depth"]]
+        if behind:
+            raise ConfigError(
+                f"{CONTROLLER_SECTION}.initial_estimate: under the guessed camera feature "
+                f"point(s) {behind} lie at estimated depth(s) "
+                f"{[round(z, 4) for z in z_hat[behind].tolist()]} m, behind it or nearer than "
+                f"projection.min_depth ({config['projection.min_depth']} m) at the start pose: "
+                "check initial_estimate.camera (position, look_at) against the arm")
+        x0 = self.trajectory(0.0)[0]
+        J_hat = model.image_jacobian(W, dH, x0, self.state.a_z_perp, self.state.a_z)
+        sigma = np.linalg.svd(J_hat, compute_uv=False)
+        B = (g.D if g.D is not None else np.zeros((model.n, model.n))) \
+            + (g.K * J_hat.T).dot(J_hat) + g.gamma * M_hat
+        rho, rho_joint = sampled_data_margin(positive_definite(M_hat), B, config["sample_time"])
+        joint = int(np.argmax(np.nan_to_num(rho_joint, nan=-1.0)))
+        names = getattr(model, "joint_names", [f"joint{i + 1}" for i in range(model.n)])
+        margin = (f"sampled-data step T M_hat^-1 (D + J*^T K J* + gamma M_hat) = {rho:.3g} "
+                  f"(largest on joint {names[joint]}: {rho_joint[joint]:.3g}; oscillates past 1, "
+                  "diverges past 2)")
+        if rho >= 2.0:
+            raise ConfigError(f"{CONTROLLER_SECTION}.joint_damping.inertia_rate / gamma / "
+                              f"sample_time: {margin}: lower joint_damping.inertia_rate "
+                              f"(now {config['joint_damping.inertia_rate']:g} 1/s) or gamma, "
+                              "or shorten sample_time")
+        if rho > 1.0:
+            log.warning("start: %s: the velocity loop will ring; lower "
+                        "joint_damping.inertia_rate or gamma", margin)
+        if sigma[-1] < config["min_singular_value"]:
+            log.warning("start: sigma_min of the estimated J(q, x) is %.3g px m/rad, below "
+                        "min_singular_value %.3g: the pseudo-inverse is damped from the start",
+                        sigma[-1], config["min_singular_value"])
+        explicit = getattr(config, "explicit", frozenset())
+        gains = {"alpha": g.alpha, "gamma": g.gamma, "K": g.K,
+                 "joint_damping.inertia_rate": config["joint_damping.inertia_rate"],
+                 "Gamma_d": g.Gamma_d, "Gamma_z_perp": g.Gamma_z_perp, "Gamma_z": g.Gamma_z}
+        derived = tuple(name for name in gains if name not in explicit
+                        and not (name == "Gamma_d" and "Gamma_d_normalized" in explicit))
+        report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
+                             gains, derived,
+                             float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names)
+        for line in report.lines():
+            log.info("start: %s", line)
+        return report
+
+    def _gains(self, D, designed=None):
+        """Gains from the configuration, with the derived ones where it has none."""
+        designed = self.designed if designed is None else designed
+        value = {name: (self.config[name] if self.config[name] is not None
+                        else designed[name]) for name in DESIGNED}
+        c = self.config
+        rates = (c["robust.leakage_kinematic"], c["robust.leakage_dynamic"])
+        leakage = (Leakage(*rates, np.array(c.a_z_perp_init), np.array(c.a_z_init),
+                           np.array(c.a_d_init)) if any(r > 0.0 for r in rates) else None)
+        return Gains(value["K"], c.alpha, c.gamma, value["Gamma_d"], value["Gamma_z_perp"],
+                     value["Gamma_z"], D if np.any(D) else None, leakage)
+
+    @property
+    def _integral(self):
+        return self.config["reference.integral_rate"] > 0.0
+
+    def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int=None):
         """The control law evaluated by :meth:`step` at time ``t`` (baselines override this).
 
         ``state`` is the integrated, clamped state; ``tensors`` the model's kinematic
         tensors at (q, q_dot); ``projection`` None when no bound is near.
         """
+        kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                           projection, self.config["min_singular_value"], tensors)
+                           projection, self.config["min_singular_value"], tensors,
+                           (kappa, e_int) if kappa > 0.0 else None)
 
     def _reject(self, t, q, qd, problems):
         # log when the kind of problem changes, not at every sample of a long outage
@@ -740,8 +926,8 @@ class AdaptiveVisualTracker:
         zero = np.zeros(n)
         g_hat = self.model.dynamic_regressor(q, zero, zero, zero) @ self.state.a_d
         tau = g_hat - self.config["safety.fallback_damping"] * qd
-        if self.gains.D is not None:
-            tau = tau - self.gains.D.dot(qd)
+        if self.damping is not None and np.any(self.damping):
+            tau = tau - self.damping.dot(qd)
         return np.clip(tau, -self.config.torque_limit, self.config.torque_limit)
 
 

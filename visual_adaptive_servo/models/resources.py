@@ -17,11 +17,15 @@
 Three forms are accepted:
 
 ``package://<package>/<path>``
-    With ROS 2 sourced, ``<path>`` inside the package's share directory
-    (``ament_index_python``).  Without ROS, this package's own files are still
-    found: ``package://visual_adaptive_servo/urdf/...`` is ``sim_bridge/urdf/...``
-    and ``package://visual_adaptive_servo/config/...`` is the checkout's ``config/``
-    (the same files ``colcon build`` installs under those names).
+    With ROS 2 sourced, ``<path>`` inside the package's share directory: the
+    first prefix of ``AMENT_PREFIX_PATH`` whose ament resource index lists the
+    package (``share/ament_index/resource_index/packages/<package>``), as
+    ``ament_index_python.get_package_share_directory`` finds it; the index is
+    read directly, so this needs no ROS Python package.  Without ROS, this
+    package's own files are still found: ``package://visual_adaptive_servo/urdf/...``
+    is ``sim_bridge/urdf/...`` and ``package://visual_adaptive_servo/config/...`` is
+    the checkout's ``config/`` (the same files ``colcon build`` installs under those
+    names).
 ``pybullet_data://<path>``
     ``<path>`` inside PyBullet's data folder (``pybullet_data.getDataPath()``),
     e.g. ``pybullet_data://kuka_iiwa/model.urdf``.
@@ -44,7 +48,11 @@ OWN_SHARE = {"urdf": os.path.join(PACKAGE_PARENT, "sim_bridge", "urdf"),
 
 
 def resolve_path(name, search_dirs=(), what="file"):
-    """Absolute path of ``name`` (see the module docstring) or FileNotFoundError naming it."""
+    """Absolute path of ``name`` (see the module docstring) or FileNotFoundError naming it.
+
+    The error says where it looked and, for ``package://``, which package was
+    needed and what would make it resolve.
+    """
     if not isinstance(name, str) or not name:
         raise FileNotFoundError(f"{what}: no file name given")
     if name.startswith("package://"):
@@ -61,24 +69,40 @@ def resolve_path(name, search_dirs=(), what="file"):
     for path in candidates:
         if os.path.isfile(path):
             return os.path.abspath(path)
+    if name.startswith("package://") and not candidates:
+        raise FileNotFoundError(f"{what}: {name!r} not found: {package_hint(package)}")
     raise FileNotFoundError(f"{what}: {name!r} not found (looked at {candidates})")
+
+
+def ament_share_directory(package):
+    """The share folder of ``package`` in the ament index of ``AMENT_PREFIX_PATH``, or None."""
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        marker = os.path.join(prefix, "share", "ament_index", "resource_index", "packages",
+                              package)
+        if prefix and os.path.isfile(marker):
+            return os.path.join(prefix, "share", package)
+    return None
+
+
+def package_hint(package):
+    """Why ``package://<package>/...`` does not resolve here, and what would resolve it."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    where = (f"no prefix of AMENT_PREFIX_PATH ({os.pathsep.join(prefixes)}) has it in its "
+             f"ament index (share/ament_index/resource_index/packages/{package})" if prefixes
+             else "AMENT_PREFIX_PATH is not set (no ROS 2 workspace sourced)")
+    own = (f"; without ROS only package://{PACKAGE}/urdf/... and package://{PACKAGE}/config/... "
+           f"resolve (to {OWN_SHARE['urdf']} and {OWN_SHARE['config']})")
+    return (f"package {package!r} is needed and {where}{own}. To resolve it, source the "
+            f"ROS 2 workspace that installs {package!r} (its setup script sets "
+            f"AMENT_PREFIX_PATH), or give the file's path instead: absolute, or relative "
+            f"(to the current folder or, with vas, to the parameter file's folder)")
 
 
 def _package_candidates(package, rest):
     candidates = []
-    try:
-        from ament_index_python.packages import (
-            PackageNotFoundError,
-            get_package_share_directory,
-        )
-    except ImportError:
-        pass
-    else:
-        try:
-            candidates.append(os.path.join(get_package_share_directory(package), rest))
-        except (PackageNotFoundError, OSError, ValueError):
-            # not installed there, or no ament prefix path set (ROS importable, not sourced)
-            pass
+    share = ament_share_directory(package)
+    if share is not None:
+        candidates.append(os.path.join(share, rest))
     if package == PACKAGE:
         folder, _, inner = rest.partition("/")
         if folder in OWN_SHARE:

@@ -23,7 +23,8 @@ Assumption 1 of the paper is checked at construction: m <= 3, n >= 2m, the
 points distinct (m = 2) and not collinear (m = 3).  The rank of J(q, u)
 (Assumption 2) depends on the pose and the camera and is checked where both
 are known (the start-up check of :func:`~visual_adaptive_servo.config.load_scenario`
-and every sample's singular-value guard).
+and every sample's singular-value guard).  The file's mass properties are
+checked before Pinocchio reads them (:func:`~.urdf_checks.check_urdf`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .base import GRAVITY, RobotCameraModel
 from .kinematic_regressor import KinematicRegressor
 from .resources import resolve_path
 from .urdf_chain import load_chain
+from .urdf_checks import check_urdf
 
 #: smallest triangle area / longest side (m) that counts as non-collinear
 COLLINEAR_TOLERANCE = 1e-3
@@ -91,6 +93,7 @@ class UrdfArmCamera(RobotCameraModel):
             raise ValueError(str(exc)) from None
         self.urdf = path
         self.chain = load_chain(path, base_link, tip_link, section)
+        check_urdf(path, self.chain.joint_names, section, simulator=False)
         offsets = np.asarray(feature_points, dtype=float)
         if offsets.size == 0 or offsets.size % 3:
             raise ValueError(f"{section}.feature_points: 3 numbers per point, got "

@@ -121,3 +121,42 @@ def run_figures(t, x_true, x_d, tau, period, transient=TRANSIENT_S):
                          if rate_window.any() else nan),
         window_s=float(np.count_nonzero(window) * period))
     return figures
+
+
+#: the signals :func:`divergence_origin` looks at, in the order ties are broken
+GROWTH_SIGNALS = ("tau", "qd", "z_hat", "a_d", "a_z", "a_z_perp", "x_obs")
+
+
+def divergence_origin(data, labels, settle=0.2, factor=10.0):
+    """Which signal left its range first before a divergence: ``(name, t)`` or None.
+
+    For every column of the signals in :data:`GROWTH_SIGNALS`, its normal range
+    is the largest deviation from its start value over the first ``settle`` of
+    the run (at least 20 samples); the column grew when its deviation passes
+    ``factor`` times that (plus 1e-6 of its size).  The earliest such crossing
+    names what grew first: a joint's torque or speed, an estimated depth, or an
+    estimate.  ``labels`` maps a signal to its column names (joint names, the
+    model's parameter labels).
+    """
+    t = data["t"]
+    count = len(t)
+    if count < 40:
+        return None
+    normal = max(20, int(settle * count))
+    first = None
+    for key in GROWTH_SIGNALS:
+        arr = np.asarray(data[key], dtype=float).reshape(count, -1)
+        finite = np.isfinite(arr)
+        start = np.where(finite[0], arr[0], 0.0)
+        deviation = np.abs(np.where(finite, arr, np.inf) - start)
+        range_ = np.nanmax(np.where(np.isfinite(deviation[:normal]), deviation[:normal], 0.0),
+                           axis=0)
+        threshold = factor * range_ + 1e-6 * (np.abs(start) + 1.0)
+        crossed = deviation[normal:] > threshold
+        for j in np.flatnonzero(crossed.any(axis=0)):
+            k = normal + int(np.argmax(crossed[:, j]))
+            if first is None or t[k] < first[1]:
+                names = labels.get(key)
+                name = names[j] if names is not None and j < len(names) else str(j)
+                first = (f"{key}[{name}]", float(t[k]))
+    return first

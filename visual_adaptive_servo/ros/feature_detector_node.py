@@ -71,7 +71,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from ..config.detector import DETECTOR_PARAMS, detector_config
 from ..recording import messages as m
 from ..schema import ConfigError, DETECTOR_SECTION
-from ..vision.detection import detect, image_points
+from ..vision.detection import image_points
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
 from .main import run_node
 from .params import declare_schema, runtime_changes
@@ -88,6 +88,7 @@ class FeatureDetectorNode(Node):
         self.specs = {spec.name: spec for spec in DETECTOR_PARAMS}
         self.params = declare_schema(self, DETECTOR_PARAMS, DETECTOR_SECTION)
         self.config = detector_config(self.params)
+        self.detector = self.config.detector()
         self.msgs = msgs = m.rclpy_messages()
 
         self.lockstep = self.params["timing_mode"] == "lockstep"
@@ -111,9 +112,10 @@ class FeatureDetectorNode(Node):
         self.counters = {"frames": 0, "frames_without_features": 0}
         self.last_reason = ""
         self.last_level, self.wall_last_diagnostics = None, None
-        self.get_logger().info(f"{self.config.m} marker(s), colours "
-                               f"{self.config.colors.tolist()}, timing_mode "
-                               f"{self.params['timing_mode']}")
+        what = (f"tag {self.config.family} id {self.config.tag_id}, points "
+                f"{list(self.config.points)}" if self.params["type"] == "apriltag" else
+                f"{self.config.m} marker(s), colours {self.config.colors.tolist()}")
+        self.get_logger().info(f"{what}, timing_mode {self.params['timing_mode']}")
 
     # -- one frame ---------------------------------------------------------------
     def _on_image(self, msg):
@@ -123,7 +125,7 @@ class FeatureDetectorNode(Node):
         except ValueError as exc:
             self._no_features(msg, str(exc))
         else:
-            result = detect(rgb, self.config)
+            result = self.detector.detect(rgb)
             if result.pixels is None:
                 self._no_features(msg, result.reason)
             else:
@@ -183,7 +185,7 @@ class FeatureDetectorNode(Node):
                 successful=False,
                 reason=f"{DETECTOR_SECTION}.markers.colors: the number of markers cannot "
                        f"change while running ({self.config.m}, got {config.m})")
-        self.params, self.config = params, config
+        self.params, self.config, self.detector = params, config, config.detector()
         self.get_logger().info(f"parameters changed: {sorted(changes)}")
         return SetParametersResult(successful=True)
 

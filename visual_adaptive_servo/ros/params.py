@@ -57,8 +57,11 @@ def descriptor(spec, read_only=None):
         low = "-inf" if spec.low is None else f"{spec.low:g}"
         high = "inf" if spec.high is None else f"{spec.high:g}"
         text = f"{text} Every entry in [{low}, {high}]."
+    # an optional parameter may stay unset (derived later) and a diagonal gain may be one
+    # number: both need a type that follows the value given
+    dynamic = spec.optional or spec.scalar
     desc = ParameterDescriptor(name=spec.name, type=PARAMETER_TYPES[spec.kind],
-                               description=text, read_only=read_only)
+                               description=text, read_only=read_only, dynamic_typing=dynamic)
     if spec.low is None and spec.high is None:
         return desc
     if spec.kind == "float":
@@ -74,6 +77,8 @@ def descriptor(spec, read_only=None):
 
 def to_ros(spec, value):
     """A schema value as the Python type rclpy infers the declared type from."""
+    if value is None:
+        return None
     if spec.kind == "float":
         return float(value)
     if spec.kind == "int":
@@ -87,7 +92,8 @@ def to_ros(spec, value):
 
 def from_ros(spec, value):
     """An rclpy parameter value (arrays come as array.array) as the schema expects it."""
-    if spec.kind in ("float_list", "str_list"):
+    if spec.kind in ("float_list", "str_list") and not isinstance(value, (int, float, str,
+                                                                          type(None))):
         return list(value)
     return value
 

@@ -16,6 +16,8 @@
 
 * :mod:`.detection`: colour-marker detection with sub-pixel centroids, an RGB image
   in and the controller's pixels out (OpenCV and numpy);
+* :mod:`.apriltag`: an AprilTag's corners or centre, sub-pixel (OpenCV's AprilTag
+  detector, then a fit of the tag's edges);
 * :mod:`.overlay`: x, x_d and x_o drawn on a picture (numpy only, so the simulator's
   renderer uses it without importing OpenCV).
 """

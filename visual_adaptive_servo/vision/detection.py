@@ -193,6 +193,10 @@ class DetectorConfig:
         """Number of markers (feature points)."""
         return len(self.colors)
 
+    def detector(self):
+        """A detector for a stream of pictures (``.detect(image)``, as the tag detector's)."""
+        return ColorDetector(self)
+
 
 @dataclass(frozen=True, eq=False)
 class MarkerDetection:
@@ -224,6 +228,16 @@ class DetectionResult:
     pixels: np.ndarray | None
     reason: str
     markers: tuple = ()
+
+
+class ColorDetector:
+    """:func:`detect` with a fixed configuration (colour markers keep no state between frames)."""
+
+    def __init__(self, config):
+        self.config = config
+
+    def detect(self, image):
+        return detect(image, self.config)
 
 
 def controller_pixels(points, config):

@@ -1,0 +1,250 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Gains derived from the arm (control/gain_design.py), on an arm the package does not ship.
+
+The arm is written here: a SCARA-type arm (two revolute joints and a prismatic
+lift) on a tilted, rotated fixed mount, one point on its quill, every length
+and the camera unknown, and no gain in its configuration.  Oracles: the
+eigenvalues the normalisation promises, the discrete velocity loop iterated
+directly for the sampled-data margin, and the closed loop itself (clean camera,
+a real camera, both pixel conventions).
+"""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from visual_adaptive_servo.config.controller import ControllerConfig
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
+from visual_adaptive_servo.control.gain_design import (DesignSettings, normalized_gain,
+                                                       sampled_data_margin)
+from visual_adaptive_servo.runner import run_scenario
+from visual_adaptive_servo.schema import ConfigError
+
+SCARA_URDF = """<?xml version="1.0"?>
+<robot name="test_scara">
+  <link name="world"/>
+  <link name="base_link">
+    <inertial><origin xyz="0 0 0.1"/><mass value="5.0"/>
+      <inertia ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.03"/></inertial>
+  </link>
+  <joint name="mount" type="fixed">
+    <parent link="world"/><child link="base_link"/>
+    <origin xyz="0 0 0.2" rpy="0.25 0 0.1"/>
+  </joint>
+  <link name="arm1">
+    <inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
+      <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.03"/></inertial>
+  </link>
+  <joint name="shoulder" type="revolute">
+    <parent link="base_link"/><child link="arm1"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="100" velocity="3"/>
+  </joint>
+  <link name="arm2">
+    <inertial><origin xyz="0.15 0 0"/><mass value="1.2"/>
+      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>
+  </link>
+  <joint name="elbow" type="revolute">
+    <parent link="arm1"/><child link="arm2"/>
+    <origin xyz="0.4 0 0.05"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="60" velocity="3"/>
+  </joint>
+  <link name="quill">
+    <inertial><origin xyz="0 0 -0.1"/><mass value="0.5"/>
+      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0002"/></inertial>
+  </link>
+  <joint name="lift" type="prismatic">
+    <parent link="arm2"/><child link="quill"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-0.3" upper="0.3" effort="200" velocity="1"/>
+  </joint>
+</robot>
+"""
+
+CAMERA = ("orientation: look_at", "up: [0.0, 0.0, 1.0]", "principal_point: [320.0, 240.0]",
+          "image_size: [640.0, 480.0]", "pixel_origin: [{origin}]", "pixel_axes: [1.0, 1.0]")
+
+SCENARIO = """sim_node:
+  ros__parameters:
+    urdf: scara.urdf
+    base_link: base_link
+    tip_link: quill
+    feature_points: [0.0, 0.0, -0.2]
+    physics_dt: 0.001
+    control_period: 0.002
+    initial_positions: [0.3, 0.8, 0.0]
+    camera:
+      position: [0.3, -2.0, 1.2]
+      look_at: [0.35, 0.45, 0.3]
+      focal_length: 0.01
+      pixel_scale: [100000.0, 100000.0]
+{sim_camera}controller_node:
+  ros__parameters:
+    model: urdf
+    urdf: scara.urdf
+    base_link: base_link
+    tip_link: quill
+    feature_points: [0.0, 0.0, -0.2]
+    sample_time: 0.002
+    camera_rate: {rate}
+    camera_latency: {latency}
+    initial_estimate:
+      camera:
+        position: [0.5, -1.8, 1.0]
+        look_at: [0.3, 0.4, 0.4]
+        focal_length: 0.008
+        pixel_scale: [120000.0, 110000.0]
+{estimated_camera}      length_scale: 1.3
+      inertia_scale: 0.6
+    trajectory:
+      offset: [{offset}]
+      a_cos: [25.0, 0.0]
+      a_sin: [0.0, 25.0]
+      omega: 0.6
+    image_bounds: [{bounds}]
+    min_singular_value: 5.0
+"""
+
+#: where the quill's point starts in top-left pixels (u right, v down, origin top left)
+START_TOP_LEFT = np.array([373.213952, 195.6280614])
+
+
+def write_scenario(folder, centred=False, rate=0.0, latency=0.0):
+    """The unshipped arm's parameter file in ``folder``, in either pixel convention."""
+    folder.joinpath("scara.urdf").write_text(SCARA_URDF)
+    origin = np.array([320.0, 240.0]) if centred else np.zeros(2)
+    start = START_TOP_LEFT - origin
+    bounds = [-320.0, 320.0, -240.0, 240.0] if centred else [0.0, 640.0, 0.0, 480.0]
+    lines = [line.format(origin=", ".join(map(str, origin))) for line in CAMERA]
+    text = SCENARIO.format(
+        sim_camera="".join(" " * 6 + line + "\n" for line in lines),
+        estimated_camera="".join(" " * 8 + line + "\n" for line in lines),
+        rate=rate, latency=latency, offset=f"{start[0] - 25.0}, {start[1]}",
+        bounds=", ".join(map(str, bounds)))
+    path = folder / ("scara_centred.yaml" if centred else "scara.yaml")
+    path.write_text(text)
+    return str(path)
+
+
+def test_normalized_gain_gives_the_rate_whatever_the_columns_scale_and_count():
+    rng = np.random.default_rng(3)
+    Y = rng.standard_normal((200, 4)) @ np.diag([1e-3, 1.0, 30.0, 5e2])
+    G = Y.T @ Y / 200
+    gamma = normalized_gain(G, 0.7)
+    np.testing.assert_allclose(np.linalg.eigvalsh(np.sqrt(gamma)[:, None] * G
+                                                  * np.sqrt(gamma)[None, :])[-1], 0.7,
+                               rtol=1e-12)
+    # columns rescaled (a pixel scale, other units): the gains follow, the rate stays
+    S = np.diag([10.0, 0.1, 3.0, 1.0])
+    np.testing.assert_allclose(normalized_gain(S @ G @ S, 0.7), gamma / np.diag(S) ** 2,
+                               rtol=1e-10)
+    # every column twice (twice the parameters, the same excitation): still the rate
+    Y2 = np.hstack([Y, Y])
+    G2 = Y2.T @ Y2 / 200
+    gamma2 = normalized_gain(G2, 0.7)
+    np.testing.assert_allclose(np.linalg.eigvalsh(np.sqrt(gamma2)[:, None] * G2
+                                                  * np.sqrt(gamma2)[None, :])[-1], 0.7,
+                               rtol=1e-10)
+
+
+@pytest.mark.parametrize("rho_target, grows, alternates", [(0.5, False, False),
+                                                          (1.5, False, True),
+                                                          (2.3, True, True)])
+def test_sampled_data_margin_predicts_the_discrete_velocity_loop(rho_target, grows, alternates):
+    M = np.array([[2.0, 0.1], [0.1, 0.01]])         # a heavy and a light joint
+    T = 1e-3
+    B = rho_target / T * M                           # every mode at the same step
+    rho, per_joint = sampled_data_margin(M, B, T)
+    np.testing.assert_allclose(rho, rho_target, rtol=1e-9)
+    np.testing.assert_allclose(per_joint, rho_target, rtol=1e-9)
+    # oracle: tau = -B v held over T on M v_dot = tau, iterated
+    step = np.eye(2) - T * np.linalg.solve(M, B)
+    v = np.array([1.0, -0.5])
+    history = [v]
+    for _ in range(40):
+        history.append(step @ history[-1])
+    assert (np.linalg.norm(history[-1]) > np.linalg.norm(history[0])) == grows
+    assert (np.sign(history[1][0]) != np.sign(history[2][0])) == alternates
+
+
+def test_derived_bandwidths_follow_the_camera_and_keep_theorem_1():
+    fast = DesignSettings(0.001, 0.0, 0.0, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3)
+    slow = DesignSettings(0.001, 30.0, 0.033, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3)
+    assert fast.bandwidths() == (40.0, 20.0)          # capped by gamma_max
+    alpha, gamma = slow.bandwidths()
+    np.testing.assert_allclose(gamma, 0.15 / (0.001 + 0.033 + 0.5 / 30.0))
+    assert alpha > gamma / 3.0
+    np.testing.assert_allclose(slow.inertia_rate(), 200.0)
+
+
+def test_a_scalar_stands_for_a_whole_diagonal(tmp_path):
+    path = write_scenario(tmp_path)
+    scenario = load_scenario(path, ("controller_node.Gamma_z_perp=180",
+                                    "controller_node.torque_limit=50"))
+    model = scenario.controller.model
+    np.testing.assert_array_equal(scenario.controller.Gamma_z_perp, np.full(model.p_perp, 180.0))
+    np.testing.assert_array_equal(scenario.controller.torque_limit, np.full(model.n, 50.0))
+    with pytest.raises(ConfigError, match=r"controller_node\.Gamma_z: needs 6 values, got 2"):
+        load_scenario(path, ("controller_node.Gamma_z=[0.1, 0.2]",))
+
+
+def test_start_refuses_a_damping_past_the_sampled_data_bound(tmp_path):
+    scenario = load_scenario(write_scenario(tmp_path),
+                             ("controller_node.joint_damping.inertia_rate=1500",))
+    tracker = AdaptiveVisualTracker(scenario.controller)
+    with pytest.raises(ConfigError, match=r"joint_damping\.inertia_rate.*sampled-data step"):
+        tracker.start(scenario.sim.initial_positions)
+
+
+def test_start_refuses_a_guessed_camera_behind_the_points(tmp_path):
+    scenario = load_scenario(write_scenario(tmp_path))
+    values = dict(scenario.controller.params)
+    values.update({"initial_estimate.camera.position": [0.35, 3.0, 0.3],
+                   "initial_estimate.camera.look_at": [0.35, 5.0, 0.3],
+                   "a_z_perp_init": None, "a_z_init": None, "a_d_init": None})
+    values = {k: v for k, v in values.items() if v is not None}
+    config = ControllerConfig.from_params(values, search_dirs=(str(tmp_path),))
+    tracker = AdaptiveVisualTracker(config)
+    with pytest.raises(ConfigError, match="behind it"):
+        tracker.start(scenario.sim.initial_positions)
+
+
+def _run(path, out, duration, overrides=()):
+    summary = run_scenario(load_scenario(path, overrides), str(out), duration=duration,
+                           progress=False, record=False, plots=False)
+    with open(os.path.join(out, "summary.json"), encoding="utf-8") as handle:
+        assert json.load(handle)["diverged"] == summary["diverged"]
+    return summary
+
+
+@pytest.mark.parametrize("centred", [False, True])
+def test_unshipped_arm_tracks_on_defaults_in_either_pixel_convention(tmp_path, centred):
+    summary = _run(write_scenario(tmp_path, centred), tmp_path / "run", 12.0)
+    assert not summary["diverged"], summary["divergence_reason"]
+    assert summary["final_rms_true_error_px"] < 0.1
+    assert summary["start_report"][0].startswith("n = 3 joints, m = 1 points")
+
+
+def test_unshipped_arm_tracks_on_defaults_with_a_real_camera(tmp_path):
+    path = write_scenario(tmp_path, rate=30.0, latency=0.033)
+    summary = _run(path, tmp_path / "run", 20.0,
+                   ("sim_node.camera_rate=30", "sim_node.camera_latency=0.033",
+                    "sim_node.pixel_noise_std=0.5", "sim_node.seed=11"))
+    assert not summary["diverged"], summary["divergence_reason"]
+    assert summary["final_rms_true_error_px"] < 0.5
