@@ -49,6 +49,9 @@ setup(
         "pin>=2.7",
         "scipy>=1.8",
         "opencv-python-headless>=4.8",
+        # the compiled kinematic tensors and timeseries.csv formatting (the numpy code runs
+        # without it); wheels for Python 3.10-3.12 with numpy 1.26 and 2.x (numba 0.68.1)
+        "numba>=0.59",
     ],
     # ruff and flake8 (+ the plugins ament_flake8 runs) give the ament lint checks without ROS
     # ray: `vas campaign --ray` (imported only then); optuna: `vas tune` (imported only then;

@@ -24,13 +24,20 @@ the camera model, the controller and the runner's bookkeeping.  Two figures:
 * ``call``: simulated time / wall time of the whole ``run_scenario`` call,
   including PyBullet start-up and writing timeseries.csv and summary.json.
 
-Each is the median of ``--repeats`` runs (default 5) after one warm-up run.
-A per-part breakdown (physics sub-steps, measurement, controller, runner rest)
-of one control period is printed from a separate instrumented loop.
+Each is the median of ``--repeats`` runs (default 5) after one warm-up run,
+per backend of the kinematic tensors (``compiled``, ``numpy``; the runs
+alternate).  Against the bare PyBullet plant, measured back to back with each
+closed-loop run: the same simulator driven by the torques that run applied,
+``measure`` (joint and link state reads, the camera) and ``apply`` (the physics
+sub-steps) only; the ratio is the closed loop's wall time per control period
+over the plant's (median of the runs' ratios).  A per-part breakdown
+(physics sub-steps, measurement, controller) of one control period is
+printed from a separate instrumented loop.
 
 Usage::
 
     python benchmarks/bench_closed_loop.py [--config FILE] [--duration S] [--repeats R]
+        [--backend both|compiled|numpy]
 
 Prints a markdown table and writes benchmarks/results/closed_loop_<config name>.json.
 """
@@ -49,6 +56,7 @@ from benchlib import environment, write_result
 from sim_bridge.simulator import Simulator
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
+from visual_adaptive_servo.models.backend import kernels
 from visual_adaptive_servo.runner import run_scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -56,19 +64,56 @@ DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")
 RESULTS = os.path.join(HERE, "results", "closed_loop_{name}.json")
 
 
-def time_runs(scenario, duration, repeats):
-    """(loop factors, call factors, last summary) over ``repeats`` runs after a warm-up."""
-    loop, call, summary = [], [], None
-    with tempfile.TemporaryDirectory() as out:
+def time_runs(scenario, duration, repeats, backends):
+    """Per backend: loop factors, call factors, ratios to the bare plant, last summary.
+
+    Every closed-loop run is followed by the bare plant driven by its torques.
+    """
+    model = scenario.controller.model
+    out = {b: {"loop": [], "call": [], "ratio": [], "loop_us": [], "plant_us": []}
+           for b in backends}
+    summary = None
+    with tempfile.TemporaryDirectory() as folder:
         for rep in range(repeats + 1):
-            t0 = time.perf_counter()
-            summary = run_scenario(scenario, out, duration=duration, progress=False,
-                                   record=False, plots=False)
-            wall = time.perf_counter() - t0
-            if rep > 0:
-                loop.append(summary["realtime_factor"])
-                call.append(summary["sim_time_s"] / wall)
-    return loop, call, summary
+            for backend in backends:
+                model.set_backend(backend)
+                t0 = time.perf_counter()
+                summary = run_scenario(scenario, folder, duration=duration, progress=False,
+                                       record=False, plots=False)
+                wall = time.perf_counter() - t0
+                plant_us = bare_plant(scenario, applied_torques(folder))
+                loop_us = summary["wall_time_s"] / summary["steps"] * 1e6
+                if rep > 0:
+                    r = out[backend]
+                    r["loop"].append(summary["realtime_factor"])
+                    r["call"].append(summary["sim_time_s"] / wall)
+                    r["loop_us"].append(loop_us)
+                    r["plant_us"].append(plant_us)
+                    r["ratio"].append(loop_us / plant_us)
+    return out, summary
+
+
+def applied_torques(folder):
+    """The torques (steps, n) of the run whose timeseries.csv is in ``folder``."""
+    path = os.path.join(folder, "timeseries.csv")
+    with open(path, encoding="utf-8") as handle:
+        header = handle.readline().strip().split(",")
+    columns = [k for k, name in enumerate(header) if name.startswith("tau.")]
+    return np.loadtxt(path, delimiter=",", skiprows=1, usecols=columns, ndmin=2)
+
+
+def bare_plant(scenario, taus):
+    """Wall time [us] per control period of the plant alone, driven by ``taus`` (steps, n)."""
+    sim = Simulator(scenario.sim)
+    try:
+        t0 = time.perf_counter()
+        for tau in taus:
+            sim.measure()
+            sim.apply(tau)
+        wall = time.perf_counter() - t0
+    finally:
+        sim.close()
+    return wall / len(taus) * 1e6
 
 
 def breakdown(scenario, duration):
@@ -98,40 +143,59 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=DEFAULT_CONFIG)
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
-    parser.add_argument("--repeats", type=int, default=5, help="timed runs")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs per backend")
+    parser.add_argument("--backend", choices=("both", "compiled", "numpy"), default="both",
+                        help="kinematic tensors backend(s) (default both, alternating)")
     parser.add_argument("--out", help="JSON result file (default: "
                         "results/closed_loop_<config name>.json)")
     args = parser.parse_args(argv)
 
+    backends = ["compiled", "numpy"] if args.backend == "both" else [args.backend]
+    if "compiled" in backends and kernels() is None:
+        parser.error("--backend compiled needs numba")
     scenario = load_scenario(args.config)
-    loop, call, summary = time_runs(scenario, args.duration, args.repeats)
-    parts = breakdown(scenario, args.duration)
+    runs, summary = time_runs(scenario, args.duration, args.repeats, backends)
     period_us = scenario.sim.control_period * 1e6
+    by_backend = {}
+    for backend in backends:
+        scenario.controller.model.set_backend(backend)
+        r = runs[backend]
+        by_backend[backend] = {
+            **{f"realtime_factor_{key}": {"median": float(np.median(r[key])),
+                                          "min": float(np.min(r[key])),
+                                          "max": float(np.max(r[key]))}
+               for key in ("loop", "call")},
+            "loop_us_per_period": float(np.median(r["loop_us"])),
+            "plant_us_per_period": float(np.median(r["plant_us"])),
+            "ratio_to_plant": {"median": float(np.median(r["ratio"])),
+                               "min": float(np.min(r["ratio"])),
+                               "max": float(np.max(r["ratio"]))},
+            "per_period_us": breakdown(scenario, args.duration)}
     result = {
         "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
         "duration_s": args.duration, "repeats": args.repeats,
-        "realtime_factor_loop": {"median": float(np.median(loop)), "min": float(np.min(loop)),
-                                 "max": float(np.max(loop))},
-        "realtime_factor_call": {"median": float(np.median(call)), "min": float(np.min(call)),
-                                 "max": float(np.max(call))},
-        "per_period_us": parts,
+        "control_period_us": period_us, "backends": by_backend,
         "final_rms_error_px": summary["final_rms_error_px"], "diverged": summary["diverged"],
         **environment(),
     }
-    print(f"closed loop, {args.duration:g} s simulated, median of {args.repeats} runs "
-          f"(numpy {np.__version__}, Python {platform.python_version()})\n")
-    print("| measure | simulated s / wall s (median) | min | max |")
-    print("|---|---:|---:|---:|")
-    for name, key in (("control loop", "realtime_factor_loop"),
-                      ("whole run_scenario call", "realtime_factor_call")):
-        r = result[key]
-        print(f"| {name} | {r['median']:.1f} | {r['min']:.1f} | {r['max']:.1f} |")
-    print(f"\nper control period ({period_us:.0f} µs simulated), median wall time:\n")
-    print("| part | µs |")
-    print("|---|---:|")
-    for name, us in parts.items():
-        print(f"| {name} | {us:.1f} |")
-    print(f"| sum | {sum(parts.values()):.1f} |")
+    print(f"closed loop, {args.duration:g} s simulated, {period_us:.0f} µs control period, "
+          f"median of {args.repeats} runs per backend (numpy {np.__version__}, Python "
+          f"{platform.python_version()}, load average {result['load_average_1min']:.2f})\n")
+    print("| backend | control loop, sim s / wall s | whole call | loop µs / period | "
+          "bare plant µs / period | loop / plant (min-max) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for backend, r in by_backend.items():
+        ratio = r["ratio_to_plant"]
+        print(f"| {backend} | {r['realtime_factor_loop']['median']:.1f} | "
+              f"{r['realtime_factor_call']['median']:.1f} | {r['loop_us_per_period']:.1f} | "
+              f"{r['plant_us_per_period']:.1f} | {ratio['median']:.2f} "
+              f"({ratio['min']:.2f}-{ratio['max']:.2f}) |")
+    print("\nper control period, median wall time [µs]:\n")
+    print("| part | " + " | ".join(backends) + " |")
+    print("|---|" + "---:|" * len(backends))
+    for name in by_backend[backends[0]]["per_period_us"]:
+        print(f"| {name} | " + " | ".join(f"{by_backend[b]['per_period_us'][name]:.1f}"
+                                          for b in backends) + " |")
     name = os.path.splitext(os.path.basename(args.config))[0]
     write_result(args.out or RESULTS.format(name=name), result)
 

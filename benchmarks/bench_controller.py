@@ -16,7 +16,9 @@
 
 What it measures: the wall time of one full :meth:`AdaptiveVisualTracker.step`
 (input validation, Euler update, projection, the control law, saturation) and
-of the bare :func:`control_law`, for the paper's RRR arm (n = 3, m = 1).
+of the bare :func:`control_law`, for the paper's RRR arm (n = 3, m = 1), and of
+the model's ``kinematic_tensors`` alone -- with each backend of the tensors
+(``compiled``: numba, ``numpy``: the reference), replays alternating.
 
 How: the scenario (default config/paper_3dof.yaml) is simulated once in
 closed loop and its measurements (t, q, q_dot, x, the frame's capture stamp)
@@ -31,10 +33,15 @@ joint loop (``--set sim_node.camera_rate=30``) the samples are also timed by
 kind: with a frame (applied at its capture time, the prediction re-run when it
 is late) and between frames (prediction only).
 
+Start-up of the compiled backend, each in a fresh process: the first run
+compiles the kernels into an empty numba cache (``NUMBA_CACHE_DIR`` a new
+temporary folder), the second loads them from it -- what every later start
+costs.  The first kernel (the paper's) also pays numba's own initialisation.
+
 Usage::
 
     python benchmarks/bench_controller.py [--config FILE] [--steps N] [--repeats R]
-        [--set NODE.PARAM=VALUE ...] [--out FILE]
+        [--backend both|compiled|numpy] [--set NODE.PARAM=VALUE ...] [--out FILE]
 
 Prints a markdown table and writes benchmarks/results/controller_step_<config>.json.
 """
@@ -42,8 +49,12 @@ Prints a markdown table and writes benchmarks/results/controller_step_<config>.j
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -52,6 +63,7 @@ from benchlib import environment, write_result
 from sim_bridge.simulator import Simulator
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import AdaptiveVisualTracker, control_law
+from visual_adaptive_servo.models.backend import kernels
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")
@@ -74,27 +86,30 @@ def record_measurements(scenario, steps):
     return samples
 
 
-def time_steps(scenario, samples, repeats):
+def time_steps(scenario, samples, repeats, backends):
     """Per-sample ns of ``step`` over ``repeats`` timed replays after one warm-up replay.
 
-    Returns (all timings, timings of samples with a frame, of samples without one, the
-    law's inputs).
+    The replays of the ``backends`` alternate.  Returns, per backend, (all timings,
+    timings of samples with a frame, of samples without one, the law's inputs).
     """
     clock = time.perf_counter_ns
-    timings, with_frame, between = [], [], []
-    law_inputs = []
+    model = scenario.controller.model
+    out = {b: ([], [], [], []) for b in backends}
     for rep in range(repeats + 1):
-        ctl = AdaptiveVisualTracker(scenario.controller)
-        for t, q, qd, x, stamp in samples:
-            t0 = clock()
-            res = ctl.step(t, q, qd, x, stamp)
-            t1 = clock()
-            if rep > 0:
-                timings.append(t1 - t0)
-                (with_frame if x is not None else between).append(t1 - t0)
-            elif res.status == "ok" and x is not None:
-                law_inputs.append((res.state, q, qd, x, ctl.desired(t)))
-    return np.array(timings), np.array(with_frame), np.array(between), law_inputs
+        for backend in backends:
+            model.set_backend(backend)
+            timings, with_frame, between, law_inputs = out[backend]
+            ctl = AdaptiveVisualTracker(scenario.controller)
+            for t, q, qd, x, stamp in samples:
+                t0 = clock()
+                res = ctl.step(t, q, qd, x, stamp)
+                t1 = clock()
+                if rep > 0:
+                    timings.append(t1 - t0)
+                    (with_frame if x is not None else between).append(t1 - t0)
+                elif res.status == "ok" and x is not None:
+                    law_inputs.append((res.state, q, qd, x, ctl.desired(t)))
+    return {b: (np.array(t), np.array(f), np.array(w), law) for b, (t, f, w, law) in out.items()}
 
 
 def time_law(ctl, law_inputs, repeats):
@@ -113,6 +128,62 @@ def time_law(ctl, law_inputs, repeats):
     return np.array(timings)
 
 
+def time_tensors(model, samples, repeats):
+    """Per-call ns of ``model.kinematic_tensors`` at the samples' (q, q_dot)."""
+    clock = time.perf_counter_ns
+    timings = []
+    for rep in range(repeats + 1):
+        for _, q, qd, _, _ in samples:
+            t0 = clock()
+            model.kinematic_tensors(q, qd)
+            t1 = clock()
+            if rep > 0:
+                timings.append(t1 - t0)
+    return np.array(timings)
+
+
+STARTUP = """
+import json, os, time
+t0 = time.perf_counter()
+import numba
+t1 = time.perf_counter()
+import numpy as np
+from sim_bridge.plant import URDF_DIR
+from visual_adaptive_servo.models import PaperRRRCamera
+from visual_adaptive_servo.models.kinematic_regressor import KinematicRegressor
+from visual_adaptive_servo.models.urdf_chain import load_chain
+from visual_adaptive_servo.recording import csv_kernels
+paper = PaperRRRCamera(backend="numpy")
+chain = KinematicRegressor(load_chain(os.path.join(URDF_DIR, "paper_rrr.urdf"), "base_link",
+                                      "tip"), [[0.0, 0.0, 0.0]], backend="numpy")
+t2 = time.perf_counter()
+paper.set_backend("compiled")
+t3 = time.perf_counter()
+chain.set_backend("compiled")
+t4 = time.perf_counter()
+csv_kernels.format_g10(np.ones(1), np.empty((1, csv_kernels.WIDTH), np.uint8),
+                       np.empty(1, np.intp), np.empty(1, np.bool_))
+t5 = time.perf_counter()
+print(json.dumps({"import_numba_s": t1 - t0, "paper_kernel_s": t3 - t2,
+                  "chain_kernel_s": t4 - t3, "csv_kernel_s": t5 - t4}))
+"""
+
+
+def time_startup():
+    """First-run (empty cache) and cached start-up of the compiled kernels, fresh processes."""
+    root = os.path.join(HERE, os.pardir)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [root] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    runs = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env["NUMBA_CACHE_DIR"] = cache
+        for name in ("first_run", "cached"):
+            done = subprocess.run([sys.executable, "-c", STARTUP],
+                                  env=env, capture_output=True, text=True, check=True)
+            runs[name] = json.loads(done.stdout.strip().splitlines()[-1])
+    return runs
+
+
 def stats(ns):
     if ns.size == 0:
         return None
@@ -125,40 +196,64 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=DEFAULT_CONFIG)
     parser.add_argument("--steps", type=int, default=4000, help="closed-loop samples (5 ms)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed replays")
+    parser.add_argument("--repeats", type=int, default=3, help="timed replays per backend")
+    parser.add_argument("--backend", choices=("both", "compiled", "numpy"), default="both",
+                        help="kinematic tensors backend(s) to time (default both, alternating)")
     parser.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE",
                         help="parameter override, as vas run --set (repeatable)")
     parser.add_argument("--out", help="JSON result file (default: results/"
                         "controller_step_<config name>.json)")
     args = parser.parse_args(argv)
 
+    backends = (["compiled", "numpy"] if args.backend == "both" else [args.backend])
+    if "compiled" in backends and kernels() is None:
+        parser.error("--backend compiled needs numba")
     scenario = load_scenario(args.config, args.set)
-    samples = record_measurements(scenario, args.steps)
-    step_ns, frame_ns, between_ns, law_inputs = time_steps(scenario, samples, args.repeats)
-    law_ns = time_law(AdaptiveVisualTracker(scenario.controller), law_inputs, args.repeats)
     model = scenario.controller.model
+    samples = record_measurements(scenario, args.steps)
+    steps = time_steps(scenario, samples, args.repeats, backends)
+    by_backend = {}
+    for backend in backends:
+        step_ns, frame_ns, between_ns, law_inputs = steps[backend]
+        model.set_backend(backend)
+        law_ns = time_law(AdaptiveVisualTracker(scenario.controller), law_inputs, args.repeats)
+        by_backend[backend] = {
+            "step": stats(step_ns), "step_with_frame": stats(frame_ns),
+            "step_between_frames": stats(between_ns), "control_law": stats(law_ns),
+            "kinematic_tensors": stats(time_tensors(model, samples, args.repeats))}
+    startup = time_startup() if "compiled" in backends else None
     result = {
         "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
         "overrides": args.set, "n": model.n, "m": model.m,
         "parameters": {"p_perp": model.p_perp, "p_z": model.p_z, "p_d": model.p_d},
-        "steps": args.steps, "repeats": args.repeats,
-        "step": stats(step_ns), "step_with_frame": stats(frame_ns),
-        "step_between_frames": stats(between_ns), "control_law": stats(law_ns),
-        **environment(),
+        "steps": args.steps, "repeats": args.repeats, "backends": by_backend,
+        "compiled_startup": startup, **environment(),
     }
     print(f"controller latency, n={model.n}, m={model.m} (p = {model.p_perp} + {model.p_z} + "
-          f"{model.p_d}), {args.steps} samples x {args.repeats} replays "
-          f"(numpy {np.__version__}, Python {platform.python_version()})\n")
-    print("| call | median [µs] | p99 [µs] | mean [µs] | min [µs] |")
-    print("|---|---:|---:|---:|---:|")
+          f"{model.p_d}), {args.steps} samples x {args.repeats} replays per backend "
+          f"(numpy {np.__version__}, Python {platform.python_version()}, load average "
+          f"{result['load_average_1min']:.2f})\n")
+    print("| call | backend | median [µs] | p99 [µs] | mean [µs] | min [µs] |")
+    print("|---|---|---:|---:|---:|---:|")
     for name, key in (("AdaptiveVisualTracker.step", "step"),
                       ("step, sample with a camera frame", "step_with_frame"),
                       ("step, sample between frames (prediction only)", "step_between_frames"),
-                      ("control_law", "control_law")):
-        s = result[key]
-        if s is not None:
-            print(f"| {name} | {s['median_us']:.1f} | {s['p99_us']:.1f} | {s['mean_us']:.1f} | "
-                  f"{s['min_us']:.1f} |")
+                      ("control_law", "control_law"),
+                      ("model.kinematic_tensors", "kinematic_tensors")):
+        for backend in backends:
+            s = by_backend[backend][key]
+            if s is not None:
+                print(f"| {name} | {backend} | {s['median_us']:.1f} | {s['p99_us']:.1f} | "
+                      f"{s['mean_us']:.1f} | {s['min_us']:.1f} |")
+    if startup:
+        print("\ncompiled backend start-up, fresh processes [s]:\n")
+        print("| | import numba | paper kernel (+ numba's initialisation) | chain kernel "
+              "| csv kernels |")
+        print("|---|---:|---:|---:|---:|")
+        for name, run in startup.items():
+            print(f"| {name.replace('_', ' ')} | {run['import_numba_s']:.2f} | "
+                  f"{run['paper_kernel_s']:.2f} | {run['chain_kernel_s']:.2f} | "
+                  f"{run['csv_kernel_s']:.2f} |")
     name = os.path.splitext(os.path.basename(args.config))[0]
     write_result(args.out or RESULTS.format(name=name + ("_" + "_".join(
         o.split(".")[-1].replace("=", "") for o in args.set) if args.set else "")), result)

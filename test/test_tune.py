@@ -114,18 +114,22 @@ def test_space_scale_ends_are_checked_element_wise_against_the_spec(tmp_path, pa
         space_of(tmp_path, "scale.controller_node.max_dt: {low: 0.5, high: 1000.0}", paper)
 
 
-def test_default_space_tunes_gamma_d_through_what_the_file_uses(paper):
+def test_default_space_tunes_what_the_file_gives_and_the_design_of_what_it_leaves_out(paper):
     scenario, file_params = paper
     space = load_space(DEFAULT_SPACE, scenario, file_params, drop_shadowed=True)
-    # the paper's file lists Gamma_d: it is scaled, Gamma_d_normalized (its default) left out
-    assert [key for key, _ in space.dropped] == ["controller_node.Gamma_d_normalized"]
+    # the paper's file gives its gains: they are tuned (scaled), their design rates left out
+    dropped = [key for key, _ in space.dropped]
+    assert "controller_node.gain_design.kinematic_rate" in dropped
+    assert "controller_node.gain_design.delay_bandwidth" in dropped
     assert space.dimensions[0].param == "gamma" and space.dimensions[1].param == "alpha"
     assert "scale.controller_node.Gamma_d" in [d.key for d in space.dimensions]
-    # the iiwa's takes Gamma_d from Gamma_d_normalized: that is tuned
+    # the iiwa's file gives no gain: the design rates are tuned, nothing is scaled
     iiwa = load_scenario(IIWA)
     iiwa_space = load_space(DEFAULT_SPACE, iiwa, read_param_file(IIWA)["controller_node"])
-    assert [key for key, _ in iiwa_space.dropped] == ["scale.controller_node.Gamma_d"]
-    assert iiwa_space.by_param("Gamma_d_normalized") is not None
+    keys = [d.key for d in iiwa_space.dimensions]
+    assert "controller_node.gain_design.kinematic_rate" in keys
+    assert not [key for key in keys if key.startswith("scale.")]
+    assert "controller_node.gamma" not in keys
 
 
 def test_a_dimension_the_file_makes_ineffective_is_refused_or_dropped(tmp_path, paper):

@@ -292,9 +292,8 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
     # sigma_min of J* and whether its pseudo-inverse was damped (NaN, 0 when not computed)
     columns += ["sigma_min_J_star", "damped"]
     blocks += [data["sigma_min_J_star"][:, None], data["damped"][:, None]]
-    table = np.hstack(blocks)
-    write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"],
-              ([float(v) for v in row] + [s] for row, s in zip(table, status)))
+    write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"], np.hstack(blocks),
+              status)
     if plots and len(data["t"]) > 1:
         # matplotlib costs ~0.5 s to import: only runs that plot pay it (campaign workers
         # and benchmarks run headless)

@@ -320,6 +320,11 @@ def _validate_config(path, d, file_params, base_values, model, search_dirs):
             _fail(path, d.key, f"with {end!r} the configuration is refused: {exc}")
 
 
+#: the controller parameters whose only role is to set other parameters' defaults (gamma also
+#: sets alpha's, but is a gain itself)
+DEFAULT_ONLY = ("Gamma_d_normalized",)
+
+
 def shadowing(d, file_params, model, search_dirs):
     """The parameters whose explicit values in the file make ``d`` ineffective, or ().
 
@@ -328,7 +333,7 @@ def shadowing(d, file_params, model, search_dirs):
     resolving the controller without the file's explicit computed parameters, at
     both ends of ``d``: the computed defaults that change are the ones ``d`` feeds.
     """
-    if d.mode != "set" or d.choices:
+    if d.mode != "set" or d.choices or d.param not in DEFAULT_ONLY:
         return ()
     computed = {s.name for s in CONTROLLER_PARAMS if s.computed}
     free = {k: v for k, v in file_params.items() if k not in computed}

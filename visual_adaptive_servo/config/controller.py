@@ -108,15 +108,15 @@ CONTROLLER_PARAMS = (
     ParamSpec("alpha", lambda m, v: v["gain_design.observer_ratio"] * v["gamma"], "float",
               "Observer gain alpha of eq (10); alpha > gamma/3.  Default: "
               "gain_design.observer_ratio x gamma.", 0.0, None),
-    ParamSpec("reference.integral_rate", 0.0, "float",
+    ParamSpec("reference.integral_rate", 0.25, "float",
               "Integral action in the reference velocity (not in the paper): x_r_dot = x_d_dot - "
               "gamma e - kappa int e, kappa = this x gamma^2; 0 = eq (18) "
               "(docs/robust_adaptation.md).", 0.0, 1.0),
-    ParamSpec("robust.leakage_kinematic", 0.0, "float",
+    ParamSpec("robust.leakage_kinematic", 0.1, "float",
               "sigma-modification of eqs (24), (25) (not in the paper): a_hat_dot -= this x "
               "(a_hat - a_hat(0)) [1/s]; 0 = the paper's laws (docs/robust_adaptation.md).",
               0.0, None, True),
-    ParamSpec("robust.leakage_dynamic", 0.0, "float",
+    ParamSpec("robust.leakage_dynamic", 0.1, "float",
               "The same for eq (23) [1/s].", 0.0, None, True),
     ParamSpec("Gamma_d_normalized", None, "float",
               "Gamma_d = this divided by the square of each Y_d column's typical size over "

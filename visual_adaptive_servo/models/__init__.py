@@ -18,9 +18,12 @@
 * :mod:`.paper_rrr`: the paper's RRR arm and camera, derived by hand;
 * :mod:`.urdf_arm`: any serial arm from its URDF with 1-3 feature points
   (:mod:`.urdf_chain` reads the chain, :mod:`.kinematic_regressor` builds
-  Property 1, :mod:`.rigid_body` Property 4 with Pinocchio).
+  Property 1, :mod:`.rigid_body` Property 4 with Pinocchio);
+* :mod:`.kernels`: the kinematic tensors compiled with numba, chosen by
+  :mod:`.backend` (the numpy code stays the reference).
 """
 
+from .backend import BACKENDS, resolve_backend
 from .base import GRAVITY, RobotCameraModel
 from .paper_rrr import CylinderLink, PaperRRRCamera
 
@@ -30,14 +33,16 @@ STRUCTURE_PARAMS = ("model", "urdf", "base_link", "tip_link", "feature_points",
                     "unknown_lengths")
 
 
-def make_model(name, structure=None, section="controller_node", search_dirs=()):
+def make_model(name, structure=None, section="controller_node", search_dirs=(), backend=None):
     """Build a model by name (the ``model`` parameter) from its structure parameters.
 
     ``structure`` holds ``urdf``, ``base_link``, ``tip_link``, ``feature_points``
     and ``unknown_lengths`` (used by ``urdf``; ``paper_rrr`` is fixed).
+    ``backend``: ``"compiled"`` or ``"numpy"`` kinematic tensors (default compiled
+    when numba imports, see :mod:`.backend`).
     """
     if name == "paper_rrr":
-        return PaperRRRCamera()
+        return PaperRRRCamera(backend=resolve_backend(backend, section))
     if name == "urdf":
         from .urdf_arm import UrdfArmCamera
 
@@ -46,9 +51,9 @@ def make_model(name, structure=None, section="controller_node", search_dirs=()):
         unknown = "all" if list(unknown) == ["all"] else list(unknown)
         return UrdfArmCamera(s.get("urdf", ""), s.get("base_link", ""), s.get("tip_link", ""),
                              s.get("feature_points", ()), unknown, section=section,
-                             search_dirs=search_dirs)
+                             search_dirs=search_dirs, backend=backend)
     raise ValueError(f"model: unknown model name {name!r}; known: {list(MODEL_NAMES)}")
 
 
-__all__ = ["GRAVITY", "MODEL_NAMES", "STRUCTURE_PARAMS", "CylinderLink", "PaperRRRCamera",
-           "RobotCameraModel", "make_model"]
+__all__ = ["BACKENDS", "GRAVITY", "MODEL_NAMES", "STRUCTURE_PARAMS", "CylinderLink",
+           "PaperRRRCamera", "RobotCameraModel", "make_model"]

@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .backend import kernels, resolve_backend
 from .urdf_chain import skew
 
 AXES = "xyz"
@@ -102,9 +103,13 @@ class KinematicRegressor:
     unknown : "all" or sequence of str
         Names of the unknown lengths (see :attr:`length_names`); the others are
         taken as known, at their nominal values.
+    backend : {"compiled", "numpy"}, optional
+        What :meth:`tensors` runs: the numba kernel
+        (:func:`.kernels.chain_tensors`) or :meth:`tensors_numpy`, the
+        reference; default compiled when numba imports (:mod:`.backend`).
     """
 
-    def __init__(self, chain, offsets, unknown="all"):
+    def __init__(self, chain, offsets, unknown="all", backend=None):
         self.chain = chain
         self.offsets = np.array(offsets, dtype=float).reshape(-1, 3)
         self.n, self.m = chain.n, len(self.offsets)
@@ -115,6 +120,7 @@ class KinematicRegressor:
         self.z_reduction = self._reduce(z_samples, self.z_full_labels)
         self.perp_reduction = self._reduce(perp_samples, self.perp_full_labels)
         self._gather()
+        self.set_backend(backend)
 
     # -- structure -----------------------------------------------------------------
     def _lengths(self, unknown):
@@ -356,9 +362,53 @@ class KinematicRegressor:
         self._perp_index = self._perp_gather([self._perp_cols[b] for b in pb])
         self.p_z, self.p_perp = len(zb), len(pb)
 
+    def set_backend(self, backend):
+        """Run :meth:`tensors` on ``backend`` from now on (None: compiled when numba imports).
+
+        Choosing compiled compiles the kernel (or loads it from numba's cache)
+        here, rather than in the first control period.
+        """
+        backend = resolve_backend(backend)
+        if backend == "compiled":
+            self._kernel_arguments()
+        self.backend = backend
+
+    def _kernel_arguments(self):
+        """The constant arrays of :func:`.kernels.chain_tensors`, and its first call."""
+        index = np.intp
+        self._kernel = kernels().chain_tensors
+        self._kernel_constants = (
+            np.ascontiguousarray(self._A), np.ascontiguousarray(self._B),
+            np.ascontiguousarray(self._C), np.ascontiguousarray(self._axes),
+            np.ascontiguousarray(self._revolute), self._frame.astype(index),
+            np.ascontiguousarray(self._dirs, dtype=float),
+            np.ascontiguousarray(self._moves[:, 0, :], dtype=float),
+            np.ascontiguousarray(self._known),
+            np.array(self._prismatic, dtype=index).reshape(-1, 2),
+            (3 * self._z_index[0] + self._z_index[1]).astype(index),
+            (3 * self._perp_index[0] + self._perp_index[1]).astype(index), self.has_w0)
+        zero = np.zeros(self.n)
+        self._kernel(zero, zero, *self._kernel_constants)
+
     # -- public ----------------------------------------------------------------------
     def tensors(self, q, qd):
-        """``(H, dH, dH_rate, W, W_rate)`` at (q, q_dot): shapes as in RobotCameraModel."""
+        """``(H, dH, dH_rate, W, W_rate)`` at (q, q_dot): shapes as in RobotCameraModel.
+
+        Runs the backend chosen at construction; :meth:`tensors_numpy` is the reference.
+        """
+        if self.backend == "numpy":
+            return self.tensors_numpy(q, qd)
+        # contiguous float64, so that no call compiles another specialisation; the kernel
+        # does not check bounds, so the shapes are checked here
+        q = np.ascontiguousarray(q, dtype=float)
+        qd = np.ascontiguousarray(qd, dtype=float)
+        if q.shape != (self.n,) or qd.shape != (self.n,):
+            raise ValueError(f"kinematic tensors: q and q_dot need shape ({self.n},), got "
+                             f"{q.shape} and {qd.shape}")
+        return self._kernel(q, qd, *self._kernel_constants)
+
+    def tensors_numpy(self, q, qd):
+        """:meth:`tensors` in numpy: the readable reference of the compiled kernel."""
         table = self._evaluate(np.asarray(q, dtype=float), np.asarray(qd, dtype=float))
         return self._assemble(table, self._z_index, self._perp_index)
 

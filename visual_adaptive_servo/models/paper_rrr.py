@@ -27,6 +27,7 @@ from math import cos, sin
 
 import numpy as np
 
+from .backend import kernels, resolve_backend
 from .base import GRAVITY, RobotCameraModel, _lagrangian_regressor
 
 
@@ -66,6 +67,10 @@ class PaperRRRCamera(RobotCameraModel):
       M11 = P1 + P2 c2^2 + P3 c23^2 + 2 Cc c2 c23, M22 = A + B + 2 Cc c3,
       M23 = B + Cc c3, M33 = B, M12 = M13 = 0, and gravity
       g = [0, G1 c2 + G2 c23, G2 c23]  (G1 is the shoulder gravity term).
+
+    ``backend`` (``"compiled"`` or ``"numpy"``, default compiled when numba imports,
+    see :mod:`.backend`) chooses what :meth:`kinematic_tensors` runs;
+    :meth:`kinematic_tensors_numpy` is the reference.
     """
 
     n = 3
@@ -78,7 +83,8 @@ class PaperRRRCamera(RobotCameraModel):
     a_d_labels = ("P1", "P2", "P3", "A", "B", "Cc", "G1", "G2")
 
     def __init__(self, l1=2.0, links=None, focal_length=0.15, scale=900.0,
-                 camera_distance=5.0, gravity=GRAVITY):
+                 camera_distance=5.0, gravity=GRAVITY, backend=None):
+        self.set_backend(backend)
         if links is None:
             links = (CylinderLink(2.0, 3.0, 0.10), CylinderLink(2.0, 2.0, 0.05),
                      CylinderLink(2.0, 1.0, 0.05))
@@ -109,7 +115,31 @@ class PaperRRRCamera(RobotCameraModel):
         G2 = self.gravity * link3.mass * lc3
         return np.array([P1, P2, P3, A, B, Cc, G1, G2])
 
+    def set_backend(self, backend):
+        """Run :meth:`kinematic_tensors` on ``backend`` from now on (see :mod:`.backend`).
+
+        Choosing compiled compiles the kernel (or loads it from numba's cache) here,
+        rather than in the first control period.
+        """
+        backend = resolve_backend(backend)
+        if backend == "compiled":
+            self._kernel = kernels().paper_tensors
+            self._kernel(np.zeros(3), np.zeros(3))
+        self.backend = backend
+
     def kinematic_tensors(self, q, qd):
+        if self.backend == "numpy":
+            return self.kinematic_tensors_numpy(q, qd)
+        # contiguous float64 of length 3: the kernel does not check bounds
+        q = np.ascontiguousarray(q, dtype=float)
+        qd = np.ascontiguousarray(qd, dtype=float)
+        if q.shape != (3,) or qd.shape != (3,):
+            raise ValueError(f"kinematic tensors: q and q_dot need shape (3,), got {q.shape} "
+                             f"and {qd.shape}")
+        return self._kernel(q, qd)
+
+    def kinematic_tensors_numpy(self, q, qd):
+        """:meth:`kinematic_tensors` in numpy: the reference of the compiled kernel."""
         # Python floats and one array for all five tensors: at n = 3 creating
         # small arrays costs more than the trigonometry (hot path, every sample)
         q1, q2, q3 = np.asarray(q, dtype=float).tolist()

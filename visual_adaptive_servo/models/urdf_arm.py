@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .backend import resolve_backend
 from .base import GRAVITY, RobotCameraModel
 from .kinematic_regressor import KinematicRegressor
 from .resources import resolve_path
@@ -81,11 +82,16 @@ class UrdfArmCamera(RobotCameraModel):
         Lengths adapted as unknown (see ``KinematicRegressor.length_names``).
     section : str
         Configuration section used in error messages.
+    backend : {"compiled", "numpy"}, optional
+        Implementation of :meth:`kinematic_tensors` (see :mod:`.backend`); default
+        compiled when numba imports.
     """
 
     def __init__(self, urdf, base_link, tip_link, feature_points, unknown_lengths="all",
-                 gravity=GRAVITY, section="controller_node", search_dirs=()):
+                 gravity=GRAVITY, section="controller_node", search_dirs=(), backend=None):
         from .rigid_body import RigidBodyDynamics
+
+        backend = resolve_backend(backend, section)
 
         try:
             path = resolve_path(urdf, search_dirs, f"{section}.urdf")
@@ -103,7 +109,7 @@ class UrdfArmCamera(RobotCameraModel):
         self.offsets = offsets
         self.gravity = float(gravity)
         try:
-            self.kinematics = KinematicRegressor(self.chain, offsets, unknown_lengths)
+            self.kinematics = KinematicRegressor(self.chain, offsets, unknown_lengths, backend)
         except ValueError as exc:
             raise ValueError(f"{section}.{exc}") from None
         self.dynamics = RigidBodyDynamics(path, base_link, tip_link, gravity)
@@ -122,6 +128,15 @@ class UrdfArmCamera(RobotCameraModel):
     @property
     def joint_names(self):
         return self.chain.joint_names
+
+    @property
+    def backend(self):
+        """``"compiled"`` or ``"numpy"``: what :meth:`kinematic_tensors` runs."""
+        return self.kinematics.backend
+
+    def set_backend(self, backend):
+        """Run :meth:`kinematic_tensors` on ``backend`` from now on (see :mod:`.backend`)."""
+        self.kinematics.set_backend(backend)
 
     def kinematic_tensors(self, q, qd):
         return self.kinematics.tensors(q, qd)

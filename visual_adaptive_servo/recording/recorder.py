@@ -38,6 +38,7 @@ about 190x at 0.2 ms per frame; lz4 comes with rosbags) and written when
 from __future__ import annotations
 
 import csv
+import io
 import json
 import logging
 import os
@@ -135,32 +136,40 @@ class McapFile:
         return channel_id
 
     def write_chunk(self, records, index, compress=False):
-        """Write one chunk of message ``records`` (bytes) and its message indexes.
+        """Write one chunk of message ``records`` and its message indexes.
 
-        ``index`` maps each channel id with messages in the chunk to
-        (log times (P,) ns, offsets (P,) of its records in ``records``);
-        ``compress``: store the records LZ4-compressed (the offsets stay those
-        in the uncompressed records, as MCAP defines them).
+        ``records``: the message records, as one bytes-like object or a list of
+        them (written one after the other, so that a chunk of megabytes is not
+        copied into one more buffer); ``index`` maps each channel id with
+        messages in the chunk to (log times (P,) ns, offsets (P,) of its records
+        in ``records``); ``compress``: store the records LZ4-compressed (the
+        offsets stay those in the uncompressed records, as MCAP defines them).
         """
+        pieces = records if isinstance(records, list) else [records]
+        size = sum(memoryview(piece).nbytes for piece in pieces)
         start = min(int(times.min()) for times, _ in index.values())
         end = max(int(times.max()) for times, _ in index.values())
-        compression, stored = ("lz4", lz4.frame.compress(records)) if compress else ("", records)
-        body = (struct.pack("<QQQI", start, end, len(records), 0) + _string(compression)
-                + struct.pack("<Q", len(stored)))
-        chunk = _record(0x06, body + stored)
-        chunk_at = self._end
-        pieces, offsets, at = [chunk], [], chunk_at + len(chunk)
+        if compress:
+            compression, stored = "lz4", [lz4.frame.compress(b"".join(pieces))]
+        else:
+            compression, stored = "", pieces
+        stored_size = sum(memoryview(piece).nbytes for piece in stored)
+        body = (struct.pack("<QQQI", start, end, size, 0) + _string(compression)
+                + struct.pack("<Q", stored_size))
+        head = struct.pack("<BQ", 0x06, len(body) + stored_size) + body
+        chunk_at, chunk_size = self._end, len(head) + stored_size
+        indexes, offsets, at = [], [], chunk_at + chunk_size
         for channel_id, (times, where) in sorted(index.items()):
             entries = np.column_stack([times, where]).astype("<u8").tobytes()
-            pieces.append(_record(0x07, struct.pack("<HI", channel_id, len(entries)) + entries))
+            indexes.append(_record(0x07, struct.pack("<HI", channel_id, len(entries)) + entries))
             offsets.append(struct.pack("<HQ", channel_id, at))
-            at += len(pieces[-1])
-        self._write(b"".join(pieces))
+            at += len(indexes[-1])
+        self._write([head, *stored, b"".join(indexes)])
         offsets = b"".join(offsets)
         self.chunk_indexes.append(
-            struct.pack("<QQQQI", start, end, chunk_at, len(chunk), len(offsets)) + offsets
-            + struct.pack("<Q", at - chunk_at - len(chunk)) + _string(compression)
-            + struct.pack("<QQ", len(stored), len(records)))
+            struct.pack("<QQQQI", start, end, chunk_at, chunk_size, len(offsets)) + offsets
+            + struct.pack("<Q", at - chunk_at - chunk_size) + _string(compression)
+            + struct.pack("<QQ", stored_size, size))
         for channel_id, (times, _) in index.items():
             self.counts[channel_id] += len(times)
         self.start = start if self.start is None else min(self.start, start)
@@ -187,14 +196,17 @@ class McapFile:
             self._tmp.unlink(missing_ok=True)
 
     def _write(self, data):
+        """Append ``data`` (bytes-like, or a list of them) to the file, all of it or nothing."""
+        pieces = data if isinstance(data, list) else [data]
         try:
-            self._out.write(data)
+            for piece in pieces:
+                self._out.write(piece)
         except BaseException:
             # a write cut short (Ctrl-C) is undone: the file ends with whole records
             self._out.seek(self._end)
             self._out.truncate()
             raise
-        self._end += len(data)
+        self._end = self._out.tell()
 
     def _write_summary(self):
         pairs = _string("serialized_metadata") + _string(self._bag_metadata())
@@ -465,6 +477,7 @@ class McapRecorder:
                     at += len(record)
             done = row_ends[s]
         parts.append(data[done:])
+        parts = [part for part in parts if len(part)]
         index = {}
         for j, (topic, *_) in enumerate(numbers):
             rows = present[:, j]
@@ -476,13 +489,73 @@ class McapRecorder:
         return b"".join(parts), index
 
 
-def write_csv(path, columns, rows):
-    """Write rows (sequences of numbers) under ``columns``."""
-    with open(path, "w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow([f"{v:.10g}" if isinstance(v, float) else v for v in row])
+#: rows of timeseries.csv formatted at a time (the compiled path's buffer: ~10 MB at 200 columns)
+CSV_BLOCK_ROWS = 2000
+
+
+def write_csv(path, columns, table, labels):
+    """Write ``table`` (N, C) as ``"%.10g"`` numbers, then the strings ``labels`` (N,).
+
+    ``columns`` (C + 1) names the columns.  The file is what ``csv.writer``
+    writes for rows ``[f"{v:.10g}" for v in row] + [label]`` (the excel dialect:
+    CR LF line ends, a label quoted only when it holds a comma, a quote or a
+    line end).  With numba the numbers are formatted by
+    :mod:`.csv_kernels` (equal to Python's, byte for byte), else by Python's ``%``
+    one row at a time.
+    """
+    table = np.ascontiguousarray(table, dtype=float)
+    if table.ndim != 2 or len(table) != len(labels):
+        raise ValueError(f"write_csv: table (N, C) and N labels, got {table.shape} and "
+                         f"{len(labels)}")
+    unique = list(dict.fromkeys(labels))
+    fields = [_csv_line(["", label])[1:-2] for label in unique]
+    compiled_csv = _csv_kernels()
+    with open(path, "wb") as handle:
+        handle.write(_csv_line(columns).encode("utf-8"))
+        if compiled_csv is None:
+            template = "%.10g," * table.shape[1] + "%s\r\n"
+            field = dict(zip(unique, fields))
+            for start in range(0, len(table), CSV_BLOCK_ROWS):
+                block = table[start:start + CSV_BLOCK_ROWS].tolist()
+                handle.write("".join(template % (*row, field[label]) for row, label in zip(
+                    block, labels[start:start + CSV_BLOCK_ROWS])).encode("utf-8"))
+            return
+        code = {label: k for k, label in enumerate(unique)}
+        encoded = [f.encode("utf-8") for f in fields]
+        label_text = np.frombuffer(b"".join(encoded), dtype=np.uint8)
+        label_offsets = np.concatenate([[0], np.cumsum([len(f) for f in encoded])]).astype(np.intp)
+        codes = np.array([code[label] for label in labels], dtype=np.intp)
+        for start in range(0, len(table), CSV_BLOCK_ROWS):
+            values = table[start:start + CSV_BLOCK_ROWS].reshape(-1)
+            text = np.empty((len(values), compiled_csv.WIDTH), dtype=np.uint8)
+            lengths = np.empty(len(values), dtype=np.intp)
+            undecided = np.empty(len(values), dtype=np.bool_)
+            compiled_csv.format_g10(values, text, lengths, undecided)
+            for i in np.flatnonzero(undecided):
+                number = ("%.10g" % values[i]).encode("ascii")
+                text[i, :len(number)] = np.frombuffer(number, dtype=np.uint8)
+                lengths[i] = len(number)
+            handle.write(compiled_csv.join_rows(
+                text, lengths, table.shape[1], codes[start:start + CSV_BLOCK_ROWS], label_text,
+                label_offsets).tobytes())
+
+
+def _csv_line(row):
+    """One row as ``csv.writer`` writes it (the excel dialect), with its CR LF."""
+    buffer = io.StringIO()
+    csv.writer(buffer).writerow(row)
+    return buffer.getvalue()
+
+
+def _csv_kernels():
+    """:mod:`.csv_kernels`, or None without numba."""
+    from ..models.backend import kernels
+
+    if kernels() is None:
+        return None
+    from . import csv_kernels
+
+    return csv_kernels
 
 
 def write_json(path, data):
