@@ -74,6 +74,7 @@ setup(
             "controller_node = visual_adaptive_servo.ros.controller_node:main",
             "sim_node = visual_adaptive_servo.ros.sim_node:main",
             "feature_detector = visual_adaptive_servo.ros.feature_detector_node:main",
+            "robot_description = visual_adaptive_servo.ros.description_node:main",
         ],
     },
 )

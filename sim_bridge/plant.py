@@ -184,6 +184,17 @@ class ArmPlant:
             pybullet.stepSimulation(physicsClientId=self.client)
         self.t += substeps * self.physics_dt
 
+    def brake(self, substeps):
+        """Stop the joints where they are and keep them there for ``substeps`` physics steps.
+
+        What a real arm's brakes do when its drives get no command: no torque, no
+        motion (the joints' velocities are zeroed at once).
+        """
+        q, _ = self.joint_state()
+        for j, qi in zip(self.joints, q):
+            pybullet.resetJointState(self.body, j, float(qi), 0.0, physicsClientId=self.client)
+        self.t += substeps * self.physics_dt
+
     def _all_joints(self, values):
         """``values`` of the controlled joints spread over every movable joint (others 0)."""
         full = {j: float(v) for j, v in zip(self.joints, values)}

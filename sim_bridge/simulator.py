@@ -17,7 +17,8 @@
 Each control period: :meth:`Simulator.measure` returns the joint state and the
 camera frame published now, if any (camera rate, noise and latency applied,
 stamped with its capture time), then :meth:`Simulator.apply` holds a torque
-over the physics sub-steps.  Commands are validated here too:
+over the physics sub-steps (or :meth:`Simulator.hold` holds the arm still on its
+brakes when there is no command).  Commands are validated here too:
 a command of the wrong length or with NaN/inf is refused and zero torque is
 applied instead, with the reason returned to the caller.
 """
@@ -271,6 +272,16 @@ class Simulator:
         self.plant.advance(self.tau, self._substeps)
         self.step_index += 1
         return problem
+
+    def hold(self):
+        """Hold the arm still for one control period, on its brakes (no command to apply).
+
+        The joints stop where they are and no torque is applied; time and the
+        camera go on as with :meth:`apply`.
+        """
+        self.tau = np.zeros(self.n)
+        self.plant.brake(self._substeps)
+        self.step_index += 1
 
     def close(self):
         self.plant.close()

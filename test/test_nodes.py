@@ -130,7 +130,7 @@ def test_lockstep_loop_equals_the_in_process_runner(context, tmp_path, camera):
         steps = round(duration / 0.005)
         assert sim.counters == {"steps": steps, "command_timeouts": 0, "refused_commands": 0,
                                 "stale_commands": 0, "frame_delivery_timeouts": 0,
-                                "detector_timeouts": 0}
+                                "detector_timeouts": 0, "held_periods": 0}
         assert ctl.samples == steps
         assert len(probe.commands) == len(probe.stamped) == steps
         assert [m.stamp_to_ns(c.header.stamp) for c in probe.stamped] == \

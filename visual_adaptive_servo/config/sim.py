@@ -120,7 +120,9 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
               "lockstep: wait for the command answering each state; realtime: wall-clock timer."),
     ParamSpec("command_timeout", 1.0, "float",
               "lockstep: wall time to wait for a command before applying zero torque (and, "
-              "with frame_ack, for a frame's acknowledgement) [s].", 1e-3, 60.0),
+              "with frame_ack, for a frame's acknowledgement); realtime: a command older than "
+              "this is not applied (zero torque; the brakes with hardware.command_topic) [s].",
+              1e-3, 60.0),
     ParamSpec("frame_ack", False, "bool",
               "lockstep: after publishing a camera frame, wait until every subscriber has "
               "acknowledged it before the joint state follows (wait_for_all_acked). Costs up to "
@@ -130,6 +132,26 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
               "lockstep, rendered: wall time to wait for the feature detector to have processed "
               "a picture (/feature_detector/processed) before the joint state follows [s].",
               1e-3, 60.0),
+    ParamSpec("hardware.command_topic", "", "str",
+              "realtime: empty = the commands come as std_msgs/Float64MultiArray on "
+              "/effort_controller/commands (joint_names order); a topic name = the simulator "
+              "is a ros2_control hardware behind JointStateTopicSystem: the commands come as "
+              "sensor_msgs/JointState (efforts in 'effort', joints by name) on this topic, and "
+              "without a command (before the first, or none for command_timeout) the arm is "
+              "held still on its brakes instead of getting zero torque."),
+    ParamSpec("hardware.state_topic", "/joint_states", "str",
+              "Topic of the simulator's sensor_msgs/JointState; with hardware.command_topic it "
+              "is JointStateTopicSystem's joint_states_topic and must not be /joint_states "
+              "(joint_state_broadcaster publishes there)."),
+    ParamSpec("hardware.effort_controller", "", "str",
+              "With hardware.command_topic: the controller that drives this hardware's effort "
+              "interfaces; while hardware.controller_manager/activity does not report it "
+              "active, the arm is held on its brakes (as a real driver stops when no controller "
+              "claims its interfaces; JointGroupEffortController commands zero effort when "
+              "deactivated, and the arm would fall). Empty: not watched (needs "
+              "controller_manager_msgs)."),
+    ParamSpec("hardware.controller_manager", "/controller_manager", "str",
+              "The controller_manager whose ~/activity hardware.effort_controller is read from."),
     ParamSpec("start.wait_for_recorder", False, "bool",
               "Start only once every recorded topic (visual_adaptive_servo.recording.recorder."
               "TOPICS) has a subscriber and /joint_states, /clock and the features have two "
@@ -237,6 +259,16 @@ class SimConfig(ValidatedParams):
         if v["camera_rate"] * v["control_period"] > 1.0 + 1e-9:
             raise ConfigError(f"{section}.camera_rate: at most one frame per control period "
                               f"({1.0 / v['control_period']:g} Hz), got {v['camera_rate']}")
+        if v["hardware.command_topic"]:
+            if v["timing_mode"] != "realtime":
+                raise ConfigError(f"{section}.hardware.command_topic: a ros2_control hardware "
+                                  f"runs on the controller_manager's clock, so timing_mode must "
+                                  f"be 'realtime', got {v['timing_mode']!r}")
+            if v["hardware.state_topic"] in ("/joint_states", v["hardware.command_topic"]):
+                raise ConfigError(f"{section}.hardware.state_topic: with hardware.command_topic "
+                                  f"it must be neither /joint_states (joint_state_broadcaster "
+                                  f"publishes there) nor the command topic, got "
+                                  f"{v['hardware.state_topic']!r}")
         camera = build_camera(v, "camera.", section)
         return cls(v, arm, camera, tag_plate(v, arm, section))
 

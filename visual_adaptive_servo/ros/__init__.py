@@ -17,6 +17,8 @@
 * :mod:`.controller_node`: the controller (``ros2 run visual_adaptive_servo controller_node``);
 * :mod:`.sim_node`: the PyBullet simulator of :mod:`sim_bridge` (``sim_node``);
 * :mod:`.feature_detector_node`: the feature detector (``feature_detector``);
+* :mod:`.description_node`: the URDF latched on /robot_description for ros2_control's
+  controller_manager (``robot_description``);
 * :mod:`.params`: a parameter schema declared on a node; :mod:`.main`: spinning and a
   clean stop on Ctrl-C.
 

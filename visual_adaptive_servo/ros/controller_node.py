@@ -50,6 +50,19 @@ depth 5): a late sample is worth less than the next one.  ``timing_mode`` must
 match the publisher's: a reliable subscription does not match a best-effort
 publisher.
 
+Behind ros2_control (README "On a real arm"): the effort controller (a
+JointGroupEffortController) sends on whatever it last received, also after this
+node has stopped, and ignores the commands while it is not active.  With
+``ros2_control.effort_controller`` set to its name, the node follows it on
+``<ros2_control.controller_manager>/activity`` (controller_manager_msgs,
+transient local): while it is not active the node does not track (no samples,
+no commands: nothing winds up), and when it is active again tracking starts
+afresh from the measured state (a new tracker: the start blend, the initial
+estimates), which is also how it starts.  Independently of ros2_control, if no
+joint state arrives for ``JOINT_STATE_WATCHDOG`` seconds of wall time the node
+says so (the hardware or the simulator stopped: with ``use_sim_time`` no sim-time
+timer would fire any more).
+
 Runtime parameters (``runtime`` in the schema: gains K and Gamma_*, torque
 limit, damping and safety settings) can be changed with ``ros2 param set``;
 the complete new set is validated by ``ControllerConfig.from_params`` before
@@ -60,10 +73,12 @@ from __future__ import annotations
 
 import logging
 import sys
+import time
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from ..config.controller import build_controller_model, CONTROLLER_PARAMS, ControllerConfig
 from ..control.controller import AdaptiveVisualTracker, frame_values, health
@@ -75,6 +90,10 @@ from .params import declare_schema, runtime_changes
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
 MAX_PENDING_FRAMES = 100   # frames kept while waiting for a joint state (more: superseded)
+JOINT_STATE_WATCHDOG = 1.0   # s of wall time without a joint state before the node says so
+# the controller_manager's ~/activity: published on every change, reliable and transient local
+ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class RosLogHandler(logging.Handler):
@@ -132,6 +151,22 @@ class ControllerNode(Node):
                                  measurement_qos)
         self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
                                  measurement_qos)
+        self.effort_controller = self.declare_parameter("ros2_control.effort_controller",
+                                                        "").value
+        manager = self.declare_parameter("ros2_control.controller_manager",
+                                         "/controller_manager").value
+        self.effort_active = not self.effort_controller  # unknown until the first activity
+        if self.effort_controller:
+            try:
+                from controller_manager_msgs.msg import ControllerManagerActivity
+            except ImportError:
+                raise ConfigError("controller_node.ros2_control.effort_controller: needs "
+                                  "controller_manager_msgs (ros2_control) installed") from None
+            self.create_subscription(ControllerManagerActivity, f"{manager}/activity",
+                                     self._on_activity, ACTIVITY_QOS)
+        self.wall_last_state = None
+        self.create_timer(JOINT_STATE_WATCHDOG / 4, self._on_watchdog,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.pending_frames = []       # (stamp ns, PolygonStamped) not yet passed on
@@ -145,6 +180,9 @@ class ControllerNode(Node):
         self.get_logger().info(f"model {params['model']} (kinematic tensors: "
                                f"{getattr(config.model, 'backend', 'numpy')} backend), joints "
                                f"{self.joint_names}, timing_mode {config.timing_mode}")
+        if self.effort_controller:
+            self.get_logger().info(f"tracking while {self.effort_controller} is active "
+                                   f"({manager}/activity)")
 
     # -- inputs ------------------------------------------------------------------
     def _on_features(self, msg):
@@ -163,7 +201,13 @@ class ControllerNode(Node):
         return max(due, key=lambda item: item[0])[1]
 
     def _on_joint_state(self, state_msg):
+        if self.wall_last_state is None or time.monotonic() - self.wall_last_state > \
+                JOINT_STATE_WATCHDOG:
+            self.get_logger().info("joint states arriving")
+        self.wall_last_state = time.monotonic()
         frame_msg = self._take_frame(m.stamp_to_ns(state_msg.header.stamp))
+        if not self.effort_active:
+            return       # the effort controller would not pass a command on
         t = m.stamp_to_time(state_msg.header.stamp)
         try:
             t, q, qd = m.joint_state_from_msg(state_msg, self.joint_names)
@@ -176,10 +220,40 @@ class ControllerNode(Node):
         result = self.tracker.step(t, q, qd, x, x_stamp)
         self.samples += 1
         self._publish(result, state_msg.header.stamp)
-        if self.tracker.report is not self.reported:
+        if self.tracker.report is not None and self.tracker.report is not self.reported:
             # the gains derived at the first joint sample, the checks at the start pose
             self.reported = self.tracker.report
             self.get_logger().info("start-up report:\n  " + "\n  ".join(self.reported.lines()))
+
+    def _on_activity(self, msg):
+        states = {c.name: c.state.label for c in msg.controllers}
+        active = states.get(self.effort_controller) == "active"
+        if active == self.effort_active:
+            return
+        self.effort_active = active
+        if active:
+            # the arm did not get this node's commands meanwhile: a new start from where it is
+            self.tracker = AdaptiveVisualTracker(self.tracker.config)
+            self.get_logger().info(f"{self.effort_controller} is active: tracking starts from "
+                                   f"the measured state")
+        else:
+            state = states.get(self.effort_controller, "not loaded")
+            self.get_logger().warning(f"{self.effort_controller} is {state}: it passes no "
+                                      f"command on, so tracking stops until it is active again")
+        self.diagnostics_pub.publish(m.diagnostics_to_msg(
+            self.msgs, self.get_clock().now().nanoseconds * 1e-9,
+            "controller_node", "OK" if active else "WARN",
+            f"{self.effort_controller} {'active' if active else 'not active: not tracking'}",
+            {}, "controller"))
+
+    def _on_watchdog(self):
+        if self.wall_last_state is None:
+            return
+        silent = time.monotonic() - self.wall_last_state
+        if silent > JOINT_STATE_WATCHDOG:
+            self.get_logger().warning(f"no joint state for {silent:.1f} s of wall time: "
+                                      f"not tracking (the hardware or the simulator stopped?)",
+                                      throttle_duration_sec=5.0)
 
     # -- one sample's outputs ----------------------------------------------------
     def _publish(self, res, stamp):

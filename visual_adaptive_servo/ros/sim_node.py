@@ -39,6 +39,21 @@ in:  lockstep: ``/controller_node/effort_command`` (sensor_msgs/JointState, torq
      rendered lockstep: ``/feature_detector/processed`` (std_msgs/Header: the detector
      has published the features of the picture with this stamp, if it found any).
 
+As a ros2_control hardware (``hardware.command_topic`` set, realtime): the
+commands come as ``joint_state_topic_hardware_interface/JointStateTopicSystem``
+sends them, a sensor_msgs/JointState with the torques in ``effort``, joints by
+name, on ``hardware.command_topic``, and the joint state goes out on
+``hardware.state_topic`` (the system's ``joint_states_topic``;
+``joint_state_broadcaster`` republishes it on /joint_states).  A command with
+NaN is no command (the hardware's command interfaces hold NaN until a
+controller writes them).  Without a command (before the first one, or none for
+``command_timeout``) the arm is held still on its brakes
+(:meth:`Simulator.hold`), time and /clock go on: the controller_manager runs
+on /clock, so the controllers can be activated before the arm moves.  With
+``hardware.effort_controller`` the arm is also held while that controller is not
+active (``<hardware.controller_manager>/activity``): JointGroupEffortController
+commands zero effort when it is deactivated, and the arm would fall.
+
 Timing (``timing_mode``)
 ------------------------
 The simulation starts once a controller is connected (it publishes the command
@@ -76,7 +91,8 @@ controller first: deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
-``command_timeout``).
+``command_timeout``; as a ros2_control hardware the latest command from
+``hardware.command_topic``, the brakes without one).
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
 is reliable (depth 10); in realtime the measurements (/joint_states, the
@@ -96,7 +112,7 @@ import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 
 from sim_bridge import render
@@ -119,6 +135,9 @@ DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing
 START_POLL = 0.05          # s of wall time between two checks for the subscribers
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
 WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
+# the controller_manager's ~/activity: published on every change, reliable and transient local
+ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class SimNode(Node):
@@ -131,6 +150,8 @@ class SimNode(Node):
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
         self.lockstep = config.timing_mode == "lockstep"
+        self.hardware_topic = config["hardware.command_topic"]
+        self.state_topic = config["hardware.state_topic"]
         self.rendered = config.camera_mode == "rendered"
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
 
@@ -141,16 +162,33 @@ class SimNode(Node):
             for topic, kind, qos in (
                 *((topic, kind, measurement_qos) for topic, kind in camera_topics),
                 ("/clock", "Clock", RELIABLE),
-                ("/joint_states", "JointState", measurement_qos),
+                (self.state_topic, "JointState", measurement_qos),
                 ("~/true_depth", "Float64MultiArray", RELIABLE))}
+        # sim_outputs names the joint state /joint_states, wherever it is published
+        self.publishers_by_topic["/joint_states"] = self.publishers_by_topic.pop(self.state_topic)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
         if self.lockstep:
             self.command_sub = self.create_subscription(
                 msgs.JointState, STAMPED_COMMAND_TOPIC, self._on_stamped_command, RELIABLE)
+        elif self.hardware_topic:
+            self.command_sub = self.create_subscription(
+                msgs.JointState, self.hardware_topic, self._on_hardware_command, RELIABLE)
         else:
             self.command_sub = self.create_subscription(
                 msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
+        self.effort_controller = config["hardware.effort_controller"] if self.hardware_topic \
+            else ""
+        self.effort_state = None if self.effort_controller else "active"
+        if self.effort_controller:
+            try:
+                from controller_manager_msgs.msg import ControllerManagerActivity
+            except ImportError:
+                raise ConfigError("sim_node.hardware.effort_controller: needs "
+                                  "controller_manager_msgs (ros2_control) installed") from None
+            self.create_subscription(ControllerManagerActivity,
+                                     f"{config['hardware.controller_manager']}/activity",
+                                     self._on_activity, ACTIVITY_QOS)
         self.processed_sub = None
         if self.rendered and self.lockstep:
             self.processed_sub = self.create_subscription(msgs.Header, PROCESSED_TOPIC,
@@ -176,8 +214,11 @@ class SimNode(Node):
                                                     self._on_detector_timeout, clock=steady,
                                                     autostart=False)
         else:
-            self.step_timer = self.create_timer(config.control_period, self._on_tick,
+            # as a ros2_control hardware the timer also publishes /clock half way between steps
+            ticks = 2 if self.hardware_topic else 1
+            self.step_timer = self.create_timer(config.control_period / ticks, self._on_tick,
                                                 clock=steady, autostart=False)
+        self.pending_clock = None
         self.ack_timeout = Duration(seconds=config.command_timeout)
 
         self.finished = Future()
@@ -186,9 +227,10 @@ class SimNode(Node):
         self.step_ns = None             # stamp of the joint state waiting for its command
         self.awaiting_detection = None  # stamp of the picture waiting for its features
         self.command, self.command_wall = None, None
+        self.braking, self.brake_reason = False, ""
         self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
                          "stale_commands": 0, "frame_delivery_timeouts": 0,
-                         "detector_timeouts": 0}
+                         "detector_timeouts": 0, "held_periods": 0}
         self.problem = ""
         self.last_level, self.t_last_diagnostics = None, None
         self.wall_start = None
@@ -222,11 +264,13 @@ class SimNode(Node):
             need["/camera/image_raw"] = 1
             if self.config["start.wait_for_recorder"]:     # the detector's and the recorder's
                 need.update({"/camera/image_raw": 2, "/camera/camera_info": 1})
-        missing = [f"{topic} ({count} of {need[topic]} subscribers)"
+        names = {"/joint_states": self.state_topic}
+        missing = [f"{names.get(topic, topic)} ({count} of {need[topic]} subscribers)"
                    for topic in sorted(need)
                    for count in [matched[topic] if topic in matched else self._subscribers(topic)]
                    if count < need[topic]]
-        command = STAMPED_COMMAND_TOPIC if self.lockstep else COMMAND_TOPIC
+        command = (STAMPED_COMMAND_TOPIC if self.lockstep
+                   else self.hardware_topic or COMMAND_TOPIC)
         if self.command_sub.get_publisher_count() == 0:
             missing.append(f"{command} (no publisher)")
         if self.rendered and self.count_publishers(FEATURES_TOPIC) == 0:
@@ -276,6 +320,24 @@ class SimNode(Node):
     def _on_command(self, msg):
         self.command, self.command_wall = m.float_array_from_msg(msg)[0], time.monotonic()
 
+    def _on_hardware_command(self, msg):
+        try:
+            _, tau = m.effort_command_from_msg(msg, self.config.joint_names)
+        except ValueError as exc:
+            self.counters["refused_commands"] += 1
+            self.problem = f"{exc}: not applied"
+            self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+            return
+        if np.all(np.isfinite(tau)):
+            self.command, self.command_wall = tau, time.monotonic()
+
+    def _on_activity(self, msg):
+        states = {c.name: c.state.label for c in msg.controllers}
+        state = states.get(self.effort_controller, "not loaded")
+        if state != self.effort_state:
+            self.effort_state = state
+            self.get_logger().info(f"{self.effort_controller} is {state}")
+
     def _on_command_timeout(self):
         if self.step_ns is None or self.finished.done():
             return
@@ -288,14 +350,50 @@ class SimNode(Node):
     def _on_tick(self):
         if self.finished.done():
             return
+        if self.pending_clock is not None:
+            # the controller_manager runs a cycle when /clock moves; the joint state its
+            # hardware then reads left half a period ago, so it is there (published with
+            # the state, /clock would often overtake it: the broadcaster would stamp the
+            # previous state with the new time)
+            self.publishers_by_topic["/clock"].publish(self.pending_clock)
+            self.pending_clock = None
+            return
         fresh = (self.command_wall is not None
                  and time.monotonic() - self.command_wall <= self.config.command_timeout)
+        if self.hardware_topic:
+            self._hardware_tick(fresh)
+            return
         if not fresh and self.command_wall is not None:
             self.counters["command_timeouts"] += 1
             self.problem = (f"command older than {self.config.command_timeout} s at "
                             f"t={self.sim.t:.3f}: zero torque applied")
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
         self._advance(self.command if fresh else np.zeros(self.sim.n))
+
+    def _hardware_tick(self, fresh):
+        """Apply the hardware's latest command, or hold the arm on its brakes without one."""
+        if fresh and self.effort_state == "active":
+            if self.braking:
+                self.braking = False
+                self.get_logger().info(f"commands from {self.hardware_topic} at "
+                                       f"t={self.sim.t:.3f}: brakes released")
+            self._advance(self.command)
+            return
+        if not self.braking:
+            self.braking = True
+            if self.effort_state != "active":
+                why = f"{self.effort_controller} is {self.effort_state or 'not reported yet'}"
+            elif self.command_wall is None:
+                why = f"no command yet from {self.hardware_topic}"
+            else:
+                why = f"no command from {self.hardware_topic} for {self.config.command_timeout} s"
+            self.get_logger().warning(f"{why} at t={self.sim.t:.3f}: arm held on its brakes")
+            self.brake_reason = why
+        self.counters["held_periods"] += 1
+        if self.command_wall is not None:
+            self.problem = f"{self.brake_reason} at t={self.sim.t:.3f}: arm held on its brakes"
+        self.sim.hold()
+        self._advance_time()
 
     def _advance(self, tau, refused=None):
         """Hold ``tau`` for one period (zero torque if it is ``refused``: why), then measure."""
@@ -311,6 +409,10 @@ class SimNode(Node):
             self.counters["refused_commands"] += 1
             self.problem = f"{refused}; zero torque applied"
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+        self._advance_time()
+
+    def _advance_time(self):
+        """After a period: finish at ``duration``, else publish the new measurement."""
         duration = self.config.duration
         if duration > 0.0 and self.sim.t >= duration - 1e-9:
             self._finish()
@@ -329,7 +431,8 @@ class SimNode(Node):
             f"in {wall:.1f} s wall time; {c['command_timeouts']} command timeouts, "
             f"{c['refused_commands']} refused commands, {c['stale_commands']} stale commands, "
             f"{c['frame_delivery_timeouts']} frame delivery timeouts, "
-            f"{c['detector_timeouts']} detector timeouts")
+            f"{c['detector_timeouts']} detector timeouts, "
+            f"{c['held_periods']} periods held on the brakes")
         self.finished.set_result(True)
 
     # -- outputs -----------------------------------------------------------------
@@ -364,9 +467,15 @@ class SimNode(Node):
         self._publish_state(self.measurement)
 
     def _publish_state(self, meas):
-        """The frame (points mode), delivered first in lockstep, then the joint state."""
+        """The frame (points mode), delivered first in lockstep, then the joint state.
+
+        As a ros2_control hardware /clock follows half a period later (:meth:`_on_tick`).
+        """
         t = meas.t
         for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
+            if topic == "/clock" and self.hardware_topic:
+                self.pending_clock = msg        # half a period later (_on_tick)
+                continue
             pub = self.publishers_by_topic[topic]
             pub.publish(msg)
             if topic == FEATURES_TOPIC and self.lockstep and self.config["frame_ack"]:
