@@ -144,14 +144,14 @@ def write_scenario(folder, centred=False, rate=0.0, latency=0.0):
 
 def test_normalized_gain_gives_the_rate_whatever_the_columns_scale_and_count():
     rng = np.random.default_rng(3)
-    Y = rng.standard_normal((200, 4)) @ np.diag([1e-3, 1.0, 30.0, 5e2])
+    Y = rng.standard_normal((200, 4)) @ np.diag([0.3, 1.0, 3.0, 5.0])
     G = Y.T @ Y / 200
     gamma = normalized_gain(G, 0.7)
     np.testing.assert_allclose(np.linalg.eigvalsh(np.sqrt(gamma)[:, None] * G
                                                   * np.sqrt(gamma)[None, :])[-1], 0.7,
                                rtol=1e-12)
     # columns rescaled (a pixel scale, other units): the gains follow, the rate stays
-    S = np.diag([10.0, 0.1, 3.0, 1.0])
+    S = np.diag([2.0, 0.5, 1.5, 1.0])
     np.testing.assert_allclose(normalized_gain(S @ G @ S, 0.7), gamma / np.diag(S) ** 2,
                                rtol=1e-10)
     # every column twice (twice the parameters, the same excitation): still the rate
@@ -163,9 +163,16 @@ def test_normalized_gain_gives_the_rate_whatever_the_columns_scale_and_count():
                                rtol=1e-10)
 
 
-@pytest.mark.parametrize("rho_target, grows, alternates", [(0.5, False, False),
-                                                          (1.5, False, True),
-                                                          (2.3, True, True)])
+def test_a_column_the_motions_hardly_excite_gets_a_bounded_gain():
+    rng = np.random.default_rng(4)
+    Y = rng.standard_normal((200, 3)) @ np.diag([1.0, 2.0, 1e-6])
+    gamma = normalized_gain(Y.T @ Y / 200, 0.5)
+    # its energy is floored at 1e-3 of the strongest column's (the second): 1000x that gain
+    np.testing.assert_allclose(gamma[2], 1000.0 * gamma[1], rtol=1e-12)
+
+
+@pytest.mark.parametrize("rho_target, grows, alternates",
+                         [(0.5, False, False), (1.5, False, True), (2.3, True, True)])
 def test_sampled_data_margin_predicts_the_discrete_velocity_loop(rho_target, grows, alternates):
     M = np.array([[2.0, 0.1], [0.1, 0.01]])         # a heavy and a light joint
     T = 1e-3
