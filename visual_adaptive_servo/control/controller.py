@@ -468,9 +468,9 @@ class StartReport:
                    f"{self.sigma_max:.4g} px m/rad")
         out.append("estimated depths: " + ", ".join(f"{z:.3f}" for z in self.z_hat.tolist())
                    + " m")
+        per_joint = zip(self.joint_names, self.margin_joint.tolist())
         out.append(f"sampled-data step (T M_hat^-1 B): {self.margin:.3g}; per joint "
-                   + ", ".join(f"{n} {r:.3g}" for n, r in zip(self.joint_names,
-                                                           self.margin_joint.tolist())))
+                   + ", ".join(f"{name} {rho:.3g}" for name, rho in per_joint))
         return out
 
 
@@ -823,7 +823,8 @@ class AdaptiveVisualTracker:
         config, model, g = self.config, self.model, gains
         H, dH, _, W, _ = model.kinematic_tensors(q, np.zeros(model.n))
         z_hat = H.dot(self.state.a_z)
-        behind = [i for i, z in enumerate(z_hat.tolist()) if not z > config["projection.min_depth"]]
+        nearest = config["projection.min_depth"]
+        behind = [i for i, z in enumerate(z_hat.tolist()) if not z > nearest]
         if behind:
             raise ConfigError(
                 f"{CONTROLLER_SECTION}.initial_estimate: under the guessed camera feature "
