@@ -191,8 +191,8 @@ def test_sampled_data_margin_predicts_the_discrete_velocity_loop(rho_target, gro
 
 
 def test_derived_bandwidths_follow_the_camera_and_keep_theorem_1():
-    fast = DesignSettings(0.001, 0.0, 0.0, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3)
-    slow = DesignSettings(0.001, 30.0, 0.033, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3)
+    fast = DesignSettings(0.001, 0.0, 0.0, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3, 1e-3)
+    slow = DesignSettings(0.001, 30.0, 0.033, 0.15, 20.0, 2.0, 0.2, 0.05, 0.1, 0.3, 1e-3)
     assert fast.bandwidths() == (40.0, 20.0)          # capped by gamma_max
     alpha, gamma = slow.bandwidths()
     np.testing.assert_allclose(gamma, 0.15 / (0.001 + 0.033 + 0.5 / 30.0))

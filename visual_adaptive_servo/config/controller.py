@@ -90,6 +90,10 @@ CONTROLLER_PARAMS = (
               "(regressor-normalised, docs/gain_design.md).", 0.0, 10.0),
     ParamSpec("gain_design.dynamic_rate", 0.3, "float",
               "Derived Gamma_d: the dynamic estimates converge at this x gamma.", 0.0, 10.0),
+    ParamSpec("gain_design.excitation_floor", 1e-3, "float",
+              "Derived adaptation gains: a regressor column counts as carrying at least this "
+              "fraction of the strongest column's energy (its gain at most 1/this times the "
+              "strongest's).", 1e-9, 1.0),
     *(ParamSpec(f"gain_design.scale.{name}", 1.0, "float",
                 f"The derived {name} times this (when {name} is left out).", 0.0, None)
       for name in DESIGNED),

@@ -51,7 +51,7 @@ import numpy as np
 DESIGNED = ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z")
 #: the ``gain_design.*`` parameters, in the order of :class:`DesignSettings`' fields
 DESIGN_NAMES = ("delay_bandwidth", "gamma_max", "observer_ratio", "damping_per_sample",
-                "K_fraction", "kinematic_rate", "dynamic_rate")
+                "K_fraction", "kinematic_rate", "dynamic_rate", "excitation_floor")
 #: joint-velocity samples drawn for the Gram matrices (fixed seed: the design is repeatable)
 DESIGN_SAMPLES = 64
 DESIGN_SEED = 20150101
@@ -74,6 +74,7 @@ class DesignSettings:
     K_fraction: float
     kinematic_rate: float       # eqs (24), (25): convergence rate / gamma
     dynamic_rate: float         # eq (23): convergence rate / gamma
+    excitation_floor: float     # a column's energy counts as at least this x the strongest's
 
     @classmethod
     def from_values(cls, values):
@@ -204,9 +205,10 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     z_mean = float(np.mean(np.abs(Z2)))
     kin_rate = settings.kinematic_rate * gamma
     # a~ enters the observer's error through Z^-1 Y a~ / alpha: alpha z / G is a rate
-    Gamma_z_perp = normalized_gain(G_perp / DESIGN_SAMPLES, kin_rate) * alpha * z_mean
-    Gamma_z = normalized_gain(G_z / DESIGN_SAMPLES, kin_rate) * alpha * z_mean
-    Gamma_d = (normalized_gain(G_d / DESIGN_SAMPLES, settings.dynamic_rate * gamma)
+    floor = settings.excitation_floor
+    Gamma_z_perp = normalized_gain(G_perp / DESIGN_SAMPLES, kin_rate, floor) * alpha * z_mean
+    Gamma_z = normalized_gain(G_z / DESIGN_SAMPLES, kin_rate, floor) * alpha * z_mean
+    Gamma_d = (normalized_gain(G_d / DESIGN_SAMPLES, settings.dynamic_rate * gamma, floor)
                if D_inv is not None else None)
     return DesignedGains(alpha, gamma, c, K, Gamma_z_perp, Gamma_z, Gamma_d,
                          settings.loop_delay, speed)
