@@ -322,7 +322,8 @@ class ControllerConfig(ValidatedParams):
                 raise ConfigError(f"{section}.{name}_init: must lie within "
                                   f"projection.{name}_min/_max, got {list(init)}")
         trajectory = _trajectory(v, model.m, section, search_dirs)
-        return cls(v, model, trajectory, tuple(search_dirs), frozenset(params))
+        return cls(v, model, trajectory, tuple(search_dirs),
+                   frozenset(name for name, value in params.items() if value is not None))
 
     def with_changes(self, **changes):
         """A new, whole-validated configuration with some parameters changed (same model)."""

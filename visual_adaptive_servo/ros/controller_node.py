@@ -72,6 +72,7 @@ it is applied.  All other parameters are read-only.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 import sys
 import time
 
@@ -125,8 +126,10 @@ class ControllerNode(Node):
             built["model"] = build_controller_model(values)
             return built["model"]
 
-        params = declare_schema(self, CONTROLLER_PARAMS, CONTROLLER_SECTION, build)
-        config = ControllerConfig.from_params(params, model=built.get("model"))
+        given = set()
+        params = declare_schema(self, CONTROLLER_PARAMS, CONTROLLER_SECTION, build, given)
+        config = replace(ControllerConfig.from_params(params, model=built.get("model")),
+                         explicit=frozenset(given))
         self.tracker = AdaptiveVisualTracker(config)
         self.joint_names = list(config.joint_names)
         self.labels = m.parameter_labels(config.model)

@@ -115,8 +115,12 @@ def runtime_changes(specs, parameters):
     return changes, None
 
 
-def declare_schema(node, specs, section, build_structure=None):
+def declare_schema(node, specs, section, build_structure=None, given=None):
     """Declare ``specs`` on ``node``; return the flat {name: value} it ends up with.
+
+    ``given``, a set, receives the names whose value is not the schema's default (set by
+    a parameter file or override): the controller's start-up report calls the others
+    derived.
 
     ``build_structure(values)`` makes the object computed defaults need (the
     model, or the simulator's arm) from the structure parameters declared so far.
@@ -145,4 +149,6 @@ def declare_schema(node, specs, section, build_structure=None):
         except ParameterException as exc:
             raise ConfigError(f"{section}.{spec.name}: {exc}") from None
         values[spec.name] = from_ros(spec, param.value)
+        if given is not None and values[spec.name] != from_ros(spec, to_ros(spec, default)):
+            given.add(spec.name)
     return values
