@@ -28,6 +28,7 @@ import numpy as np
 import pybullet
 import pybullet_data
 import pytest
+import yaml
 
 from conftest import ROOT
 from sim_bridge.plant import URDF_DIR, ArmPlant
@@ -374,8 +375,14 @@ def test_vas_run_names_the_package_a_package_url_needs(tmp_path, capsys, monkeyp
                           "urdf/ur5.urdf' not found: package 'ur_description' is needed")
 
 
-SHIPPED = sorted(p for p in glob.glob(os.path.join(ROOT, "config", "*.yaml"))
-                 if "sim_node" in open(p, encoding="utf-8").read())
+def _is_scenario(path):
+    """A scenario file: a sim_node and a controller_node section (not a controllers YAML)."""
+    with open(path, encoding="utf-8") as handle:
+        sections = yaml.safe_load(handle)
+    return isinstance(sections, dict) and {"sim_node", "controller_node"} <= set(sections)
+
+
+SHIPPED = sorted(p for p in glob.glob(os.path.join(ROOT, "config", "*.yaml")) if _is_scenario(p))
 
 
 @pytest.mark.parametrize("config", SHIPPED, ids=os.path.basename)
