@@ -43,7 +43,6 @@ Nothing reads the true parameters.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import sqrt
 
 import numpy as np
 
@@ -160,8 +159,7 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     DesignedGains
     """
     n, m2 = model.n, 2 * model.m
-    alpha_d, gamma_d = settings.bandwidths()
-    gamma = gamma_d if gamma is None else gamma
+    gamma = settings.bandwidths()[1] if gamma is None else gamma
     alpha = (settings.observer_ratio * gamma if alpha is None else alpha)
     c = settings.inertia_rate()
     M_hat = model.estimated_mass_matrix(q0, state.a_d)
@@ -240,17 +238,3 @@ def sampled_data_margin(M_hat, B, T):
     diag = np.diag(M_hat)
     rho_joint = T * np.diag(B) / np.where(diag > 0.0, diag, np.inf)
     return rho, rho_joint
-
-
-def describe(value):
-    """A gain for the start-up report: a scalar, or min..max of a diagonal."""
-    arr = np.atleast_1d(np.asarray(value, dtype=float))
-    if arr.size == 1 or np.all(arr == arr[0]):
-        return f"{arr[0]:.4g}" + (f" x{arr.size}" if arr.size > 1 else "")
-    return f"{arr.min():.3g}..{arr.max():.3g} ({arr.size})"
-
-
-def rms(values):
-    """Root mean square of a sequence."""
-    values = list(values)
-    return sqrt(sum(v * v for v in values) / len(values)) if values else float("nan")
