@@ -123,17 +123,14 @@ def typical_image_speed(trajectory, m2, gamma, horizon=20.0, samples=200):
 
 @dataclass(frozen=True)
 class DesignedGains:
-    """The derived gains and what they were derived from (the start-up report reads it)."""
+    """The gains :func:`design_gains` derives (the start-up report lists them)."""
 
     alpha: float
     gamma: float
-    inertia_rate: float
     K: np.ndarray
     Gamma_z_perp: np.ndarray
     Gamma_z: np.ndarray
     Gamma_d: np.ndarray | None
-    loop_delay: float
-    image_speed: np.ndarray
 
 
 def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gamma=None):
@@ -161,15 +158,15 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     n, m2 = model.n, 2 * model.m
     gamma = settings.bandwidths()[1] if gamma is None else gamma
     alpha = (settings.observer_ratio * gamma if alpha is None else alpha)
-    c = settings.inertia_rate()
-    M_hat = model.estimated_mass_matrix(q0, state.a_d)
     if D is None:
-        D = c * positive_definite(M_hat)
+        D = settings.inertia_rate() * positive_definite(model.estimated_mass_matrix(q0, state.a_d))
     zero = np.zeros(n)
     H, dH, _, W, _ = model.kinematic_tensors(q0, zero)
-    H2, dH2 = H.repeat(2, axis=0), dH.repeat(2, axis=0)
     x0 = trajectory(0.0)[0]
+    H2, dH2 = H.repeat(2, axis=0), dH.repeat(2, axis=0)
     Z2 = H2.dot(state.a_z)
+    # J_hat*(q0, x_d(0)) of eq (a1), as the law forms it (estimated_kinematics): the same
+    # rounding as the per-sample J*, not model.image_jacobian's
     J_star = W.dot(state.a_z_perp) - x0[:, None] * dH2.dot(state.a_z)
 
     # K: the largest scalar with J*^T K J* <= K_fraction D
@@ -208,8 +205,7 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     Gamma_z = normalized_gain(G_z / DESIGN_SAMPLES, kin_rate, floor) * alpha * z_mean
     Gamma_d = (normalized_gain(G_d / DESIGN_SAMPLES, settings.dynamic_rate * gamma, floor)
                if D_inv is not None else None)
-    return DesignedGains(alpha, gamma, c, K, Gamma_z_perp, Gamma_z, Gamma_d,
-                         settings.loop_delay, speed)
+    return DesignedGains(alpha, gamma, K, Gamma_z_perp, Gamma_z, Gamma_d)
 
 
 def positive_definite(M, floor=1e-6):
