@@ -16,7 +16,8 @@
 
 What it measures: :func:`visual_adaptive_servo.runner.run_scenario` on the
 reference scenario (config/paper_3dof.yaml, 30 s, 5 ms control period, 1 ms
-physics) without the MCAP recording and without plots -- the PyBullet plant,
+physics) and the iiwa's (config/iiwa_3points.yaml, 1 ms control period), or the
+``--config`` files, without the MCAP recording and without plots -- the PyBullet plant,
 the camera model, the controller and the runner's bookkeeping.  Two figures:
 
 * ``loop``: simulated time / wall time of the control loop alone (what
@@ -36,10 +37,11 @@ printed from a separate instrumented loop.
 
 Usage::
 
-    python benchmarks/bench_closed_loop.py [--config FILE] [--duration S] [--repeats R]
+    python benchmarks/bench_closed_loop.py [--config FILE ...] [--duration S] [--repeats R]
         [--backend both|compiled|numpy]
 
-Prints a markdown table and writes benchmarks/results/closed_loop_<config name>.json.
+Prints markdown tables, the ratios of every scenario last, and writes
+benchmarks/results/closed_loop_<config name>.json per scenario.
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ from visual_adaptive_servo.models.backend import kernels
 from visual_adaptive_servo.runner import run_scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DEFAULT_CONFIG = os.path.join(HERE, os.pardir, "config", "paper_3dof.yaml")
+DEFAULT_CONFIGS = [os.path.join(HERE, os.pardir, "config", name)
+                   for name in ("paper_3dof.yaml", "iiwa_3points.yaml")]
 RESULTS = os.path.join(HERE, "results", "closed_loop_{name}.json")
 
 
@@ -141,7 +144,9 @@ def breakdown(scenario, duration):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--config", default=DEFAULT_CONFIG)
+    parser.add_argument("--config", action="append",
+                        help="scenario (repeatable; default config/paper_3dof.yaml and "
+                        "config/iiwa_3points.yaml, each then written to its own result file)")
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per backend")
     parser.add_argument("--backend", choices=("both", "compiled", "numpy"), default="both",
@@ -153,7 +158,24 @@ def main(argv=None):
     backends = ["compiled", "numpy"] if args.backend == "both" else [args.backend]
     if "compiled" in backends and kernels() is None:
         parser.error("--backend compiled needs numba")
-    scenario = load_scenario(args.config)
+    configs = args.config or DEFAULT_CONFIGS
+    if args.out and len(configs) > 1:
+        parser.error("--out needs a single --config")
+    ratios = {}
+    for config in configs:
+        ratios[config] = bench(config, args, backends)
+    print("\nloop / bare plant, per control period (median of the runs; targets of issue 18, "
+          "compiled: the iiwa at 1 kHz <= 4x, the paper <= 2.5x):\n")
+    print("| scenario | control period | " + " | ".join(backends) + " |")
+    print("|---|---:|" + "---:|" * len(backends))
+    for config, (period_us, by_backend) in ratios.items():
+        print(f"| {os.path.basename(config)} | {period_us:.0f} µs | " + " | ".join(
+            f"{by_backend[b]['ratio_to_plant']['median']:.2f}x" for b in backends) + " |")
+
+
+def bench(config, args, backends):
+    """Time one scenario (both backends), print its tables, write its result file."""
+    scenario = load_scenario(config)
     runs, summary = time_runs(scenario, args.duration, args.repeats, backends)
     period_us = scenario.sim.control_period * 1e6
     by_backend = {}
@@ -172,13 +194,14 @@ def main(argv=None):
                                "max": float(np.max(r["ratio"]))},
             "per_period_us": breakdown(scenario, args.duration)}
     result = {
-        "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
+        "config": os.path.relpath(os.path.abspath(config), os.path.join(HERE, os.pardir)),
         "duration_s": args.duration, "repeats": args.repeats,
         "control_period_us": period_us, "backends": by_backend,
         "final_rms_error_px": summary["final_rms_error_px"], "diverged": summary["diverged"],
         **environment(),
     }
-    print(f"closed loop, {args.duration:g} s simulated, {period_us:.0f} µs control period, "
+    print(f"\n{os.path.basename(config)}: closed loop, {args.duration:g} s simulated, "
+          f"{period_us:.0f} µs control period, "
           f"median of {args.repeats} runs per backend (numpy {np.__version__}, Python "
           f"{platform.python_version()}, load average {result['load_average_1min']:.2f})\n")
     print("| backend | control loop, sim s / wall s | whole call | loop µs / period | "
@@ -196,8 +219,9 @@ def main(argv=None):
     for name in by_backend[backends[0]]["per_period_us"]:
         print(f"| {name} | " + " | ".join(f"{by_backend[b]['per_period_us'][name]:.1f}"
                                           for b in backends) + " |")
-    name = os.path.splitext(os.path.basename(args.config))[0]
+    name = os.path.splitext(os.path.basename(config))[0]
     write_result(args.out or RESULTS.format(name=name), result)
+    return period_us, by_backend
 
 
 if __name__ == "__main__":

@@ -388,6 +388,14 @@ def joint_space_law(model, gains, state, q, qd, tensors, jacobian, depth, refere
                      projection_active, model_rate)
 
 
+def _law_output(raw):
+    """LawOutput of :func:`.law_kernels.law`'s outputs (the compiled :func:`control_law`)."""
+    (tau, x_obs_dot, a_perp_dot, a_z_dot, a_d_dot, s, qr_dot, qr_ddot, J_star, z_hat, rate,
+     sigma_min, damped, active) = raw
+    return LawOutput(tau, EstimatorState(x_obs_dot, a_perp_dot, a_z_dot, a_d_dot), s, qr_dot,
+                     qr_ddot, J_star, z_hat, sigma_min, damped, active, rate)
+
+
 def _damped_gram_inverse(G, min_singular_value):
     """((J* J*^T) + lam^2 I)^-1, sigma_min(J*) and whether lam > 0, from G = J* J*^T.
 
@@ -531,6 +539,7 @@ class AdaptiveVisualTracker:
         self.damping = None         # D of the joint-space damping, fixed at the first sample
         self.report = None          # the start-up report (start_report), at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
+        self._law_backend = self._law_kernel = None     # _compiled_law
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
         self.projection = (Projection(config["projection.a_z_perp_min"],
@@ -540,6 +549,7 @@ class AdaptiveVisualTracker:
                                       config["projection.min_depth"])
                            if config["projection.enabled"] else None)
         self.reset()
+        self._compiled_law()        # compile (or load) the kernel now, not at the first sample
 
     def reset(self):
         """Forget everything: the next valid sample starts the controller."""
@@ -891,9 +901,30 @@ class AdaptiveVisualTracker:
         tensors at (q, q_dot); ``projection`` None when no bound is near.
         """
         kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
+        integral = (kappa, e_int) if kappa > 0.0 else None
+        compiled = self._compiled_law()
+        if compiled is not None:
+            return _law_output(compiled(self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                                        projection, self.config["min_singular_value"], tensors,
+                                        integral))
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                           projection, self.config["min_singular_value"], tensors,
-                           (kappa, e_int) if kappa > 0.0 else None)
+                           projection, self.config["min_singular_value"], tensors, integral)
+
+    def _compiled_law(self):
+        """:class:`~.law_kernels.CompiledLaw` when the model runs the compiled backend, else None.
+
+        Then :meth:`_law` evaluates the compiled kernel instead of :func:`control_law`
+        (the same law, tested equal to 1e-12); followed when the model's backend changes.
+        """
+        backend = getattr(self.model, "backend", "numpy")
+        if backend != self._law_backend:
+            self._law_backend, self._law_kernel = backend, None
+            kernel = getattr(self.model, "dynamics_kernel", None)
+            if backend == "compiled" and kernel is not None and kernel() is not None:
+                from .law_kernels import CompiledLaw
+
+                self._law_kernel = CompiledLaw(self.model)
+        return self._law_kernel
 
     def _reject(self, t, q, qd, problems):
         # log when the kind of problem changes, not at every sample of a long outage

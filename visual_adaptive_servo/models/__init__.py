@@ -19,7 +19,8 @@
 * :mod:`.urdf_arm`: any serial arm from its URDF with 1-3 feature points
   (:mod:`.urdf_chain` reads the chain, :mod:`.kinematic_regressor` builds
   Property 1, :mod:`.rigid_body` Property 4 with Pinocchio);
-* :mod:`.kernels`: the kinematic tensors compiled with numba, chosen by
+* :mod:`.kernels`: the kinematic tensors compiled with numba, and
+  :mod:`.dynamics_kernels` the dynamic regressors Y_d, chosen by
   :mod:`.backend` (the numpy code stays the reference).
 """
 

@@ -129,6 +129,13 @@ class RobotCameraModel(ABC):
     def gravity_torque(self, q):
         """True gravity torque g(q) (n,)."""
 
+    def dynamics_kernel(self):
+        """``(kind, constants)`` of a compiled Y_d for the compiled control law, or None.
+
+        None (this default): the control law runs in numpy (see control/law_kernels.py).
+        """
+        return None
+
     def estimated_mass_matrix(self, q, a_d):
         """M(q; a_d) (n, n) from the dynamic regressor: column j is Y_d(q, 0, 0, e_j) a_d - g."""
         zero = np.zeros(self.n)

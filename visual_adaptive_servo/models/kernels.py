@@ -51,21 +51,23 @@ def cache_dir():
     return os.path.join(base, "visual_adaptive_servo", "numba")
 
 
-def compiled(function):
-    """``numba.njit(cache=True)`` with :func:`cache_dir` as numba's cache directory.
+def compiled(function=None, **options):
+    """``numba.njit(cache=True, **options)`` with :func:`cache_dir` as numba's cache directory.
 
     numba picks a function's cache directory when it is decorated, so the
     directory is set for this decoration only and other numba users of the
-    process keep theirs.
+    process keep theirs.  ``@compiled`` or ``@compiled(error_model="numpy", ...)``.
     """
+    if function is None:
+        return lambda f: compiled(f, **options)
     saved = numba_config.CACHE_DIR
     numba_config.CACHE_DIR = cache_dir()
     try:
-        return numba.njit(cache=True)(function)
+        return numba.njit(cache=True, **options)(function)
     except RuntimeError as exc:  # numba: "cannot cache function ...: no locator available"
         log.warning("compiled kernels: no writable cache directory (%s); compiling at every "
                     "start", exc)
-        return numba.njit(function)
+        return numba.njit(**options)(function)
     finally:
         numba_config.CACHE_DIR = saved
 

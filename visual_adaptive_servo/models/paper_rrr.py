@@ -123,9 +123,17 @@ class PaperRRRCamera(RobotCameraModel):
         """
         backend = resolve_backend(backend)
         if backend == "compiled":
+            from .dynamics_kernels import paper_regressor
+
             self._kernel = kernels().paper_tensors
             self._kernel(np.zeros(3), np.zeros(3))
+            self._regressor_kernel = paper_regressor
+            self._regressor_kernel(*np.zeros((4, 3)))
         self.backend = backend
+
+    def dynamics_kernel(self):
+        """``(0, ())`` with the compiled backend (the law's kernel has Y_d inline), else None."""
+        return (0, ()) if self.backend == "compiled" else None
 
     def kinematic_tensors(self, q, qd):
         if self.backend == "numpy":
@@ -198,8 +206,18 @@ class PaperRRRCamera(RobotCameraModel):
         return M, dM, g
 
     def dynamic_regressor(self, q, qd, xi, xi_dot):
+        if self.backend == "numpy":
+            return self.dynamic_regressor_numpy(q, qd, xi, xi_dot)
+        args = [np.ascontiguousarray(v, dtype=float) for v in (q, qd, xi, xi_dot)]
+        if any(v.shape != (3,) for v in args):
+            raise ValueError(f"dynamic regressor: q, q_dot, xi, xi_dot need shape (3,), got "
+                             f"{[v.shape for v in args]}")
+        return self._regressor_kernel(*args)
+
+    def dynamic_regressor_numpy(self, q, qd, xi, xi_dot):
         """Y_d in closed form: the Christoffel sums of :func:`_lagrangian_regressor` by hand.
 
+        The reference of the compiled kernel (:func:`.dynamics_kernels.paper_regressor`).
         Column by column, with w = q_dot, e = xi_dot, w23 = w2 + w3,
         h2 = s2 c23 + c2 s23 and h3 = c2 s23::
 

@@ -227,6 +227,41 @@ class RigidBodyDynamics:
         # ~3.5 us for Y[:, B] or np.take on 7 x 70, measured)
         return self._full_regressor(q, qd, xi, xi_dot).take(self.base_columns, 1)
 
+    def kernel_constants(self):
+        """The constant arrays of :func:`.dynamics_kernels.chain_regressor` for this chain.
+
+        ``(R_J, p_J, S, revolute, a0, columns)``: each joint's placement in its
+        parent's frame (n, 3, 3), (n, 3), its motion subspace (n, 6: linear,
+        angular, Pinocchio's joint velocity for a unit rate at the neutral
+        configuration), 1.0 for a revolute joint, -gravity (3,) and the base
+        columns.  ValueError when the chain is not one serial line of 1-dof joints.
+        """
+        model = self.model
+        n = self.n
+        if list(model.parents[1:]) != list(range(n)):
+            raise ValueError(f"the joints' parents {list(model.parents[1:])} are not a serial "
+                             "chain")
+        R_J = np.empty((n, 3, 3))
+        p_J = np.empty((n, 3))
+        S = np.empty((n, 6))
+        data = model.createData()
+        q0 = pin.neutral(model)
+        for i in range(n):
+            placement = model.jointPlacements[i + 1]
+            R_J[i], p_J[i] = placement.rotation, placement.translation
+            rate = np.zeros(n)
+            rate[i] = 1.0
+            pin.forwardKinematics(model, data, q0, rate)
+            S[i] = data.v[i + 1].vector
+        angular = np.linalg.norm(S[:, 3:], axis=1)
+        linear = np.linalg.norm(S[:, :3], axis=1)
+        revolute = (angular > 0.5).astype(float)
+        if not np.all(np.where(revolute > 0.0, linear < 1e-12, angular < 1e-12)):
+            raise ValueError("a joint is neither a pure rotation nor a pure translation")
+        a0 = -np.array(model.gravity.linear, dtype=float)
+        return (np.ascontiguousarray(R_J), np.ascontiguousarray(p_J), np.ascontiguousarray(S),
+                revolute, a0, np.ascontiguousarray(self.base_columns, dtype=np.intp))
+
     def parameters(self):
         """True dynamic parameters a_d (p_d,) from the URDF inertias (a_base = E a_full)."""
         return self.base_map @ self._a_full

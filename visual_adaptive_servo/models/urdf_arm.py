@@ -29,6 +29,8 @@ checked before Pinocchio reads them (:func:`~.urdf_checks.check_urdf`).
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from .backend import resolve_backend
@@ -37,6 +39,8 @@ from .kinematic_regressor import KinematicRegressor
 from .resources import resolve_path
 from .urdf_chain import load_chain
 from .urdf_checks import check_urdf
+
+log = logging.getLogger(__name__)
 
 #: smallest triangle area / longest side (m) that counts as non-collinear
 COLLINEAR_TOLERANCE = 1e-3
@@ -124,6 +128,7 @@ class UrdfArmCamera(RobotCameraModel):
         self.a_z_labels = self.kinematics.z_reduction.labels
         self.a_d_labels = tuple(self.dynamics.parameter_labels)
         self._truth = None
+        self._compile_dynamics()
 
     @property
     def joint_names(self):
@@ -135,13 +140,62 @@ class UrdfArmCamera(RobotCameraModel):
         return self.kinematics.backend
 
     def set_backend(self, backend):
-        """Run :meth:`kinematic_tensors` on ``backend`` from now on (see :mod:`.backend`)."""
+        """Run :meth:`kinematic_tensors` and :meth:`dynamic_regressor` on ``backend`` from now on.
+
+        See :mod:`.backend`.
+        """
         self.kinematics.set_backend(backend)
+        self._compile_dynamics()
+
+    def _compile_dynamics(self):
+        """With the compiled backend: the compiled Y_d, checked once against Pinocchio's.
+
+        A chain the kernel cannot describe, or a mismatch, keeps Pinocchio's (a warning).
+        """
+        self._dynamics_constants = None
+        if self.backend != "compiled":
+            return
+        from . import dynamics_kernels
+
+        try:
+            constants = self.dynamics.kernel_constants()
+        except ValueError as exc:
+            log.warning("dynamic regressor: Pinocchio's (the compiled one cannot run: %s)", exc)
+            return
+        rng = np.random.default_rng(0)
+        q = rng.uniform(-np.pi, np.pi, self.n)
+        qd, xi, xi_dot = rng.standard_normal((3, self.n))
+        compiled = dynamics_kernels.chain_regressor(q, qd, xi, xi_dot, *constants)
+        reference = self.dynamics.regressor(q, qd, xi, xi_dot)
+        error = np.max(np.abs(compiled - reference)) / max(np.max(np.abs(reference)), 1.0)
+        if not error < 1e-10:
+            log.warning("dynamic regressor: Pinocchio's (the compiled one differs by %.3g of "
+                        "its scale at a random state)", error)
+            return
+        self._dynamics_constants = constants
+
+    def dynamics_kernel(self):
+        """``(1, constants)`` of the compiled Y_d (:mod:`.dynamics_kernels`), or None."""
+        if self._dynamics_constants is None:
+            return None
+        return 1, self._dynamics_constants
 
     def kinematic_tensors(self, q, qd):
         return self.kinematics.tensors(q, qd)
 
     def dynamic_regressor(self, q, qd, xi, xi_dot):
+        if self._dynamics_constants is None:
+            return self.dynamics.regressor(q, qd, xi, xi_dot)
+        from .dynamics_kernels import chain_regressor
+
+        args = [np.ascontiguousarray(v, dtype=float) for v in (q, qd, xi, xi_dot)]
+        if any(v.shape != (self.n,) for v in args):
+            raise ValueError(f"dynamic regressor: q, q_dot, xi, xi_dot need shape ({self.n},), "
+                             f"got {[v.shape for v in args]}")
+        return chain_regressor(*args, *self._dynamics_constants)
+
+    def dynamic_regressor_numpy(self, q, qd, xi, xi_dot):
+        """:meth:`dynamic_regressor` of the numpy backend (Pinocchio's): the reference."""
         return self.dynamics.regressor(q, qd, xi, xi_dot)
 
     def estimate(self, camera_matrix, length_scale=1.0, inertia_scale=1.0):

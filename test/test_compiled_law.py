@@ -1,0 +1,296 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The compiled control law and dynamic regressors against their references.
+
+Oracles: the numpy :func:`control_law` (itself checked against the proof's
+Lyapunov functions and finite differences in test_controller.py), evaluated
+on the numpy kinematic tensors with the reference dynamic regressor (the
+closed form for the paper's arm, Pinocchio's joint torque regressor for a
+URDF chain); and Pinocchio for the compiled regressors.  The law is compared
+at every sample of short closed-loop runs of each shipped arm -- as shipped,
+without projection, with tight bounds that the projection hits, without
+latency compensation, with a 30 Hz camera 33 ms late, with and without the
+integral action and leakage, with and without joint damping -- and at random
+inputs with a damped pseudo-inverse.  "1e-12 relative" is relative to each
+output's largest entry (an entry that is zero in exact arithmetic comes out
+as 1e-17 in one and 0 in the other).
+"""
+
+import dataclasses
+import os
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from test_compiled_tensors import reference_of
+from test_urdf_kinematics import SYNTHETIC
+from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import (_law_output, AdaptiveVisualTracker,
+                                                      control_law, EstimatorState, Leakage,
+                                                      Projection)
+from visual_adaptive_servo.models import PaperRRRCamera
+from visual_adaptive_servo.models.rigid_body import RigidBodyDynamics
+from visual_adaptive_servo.models.urdf_arm import UrdfArmCamera
+from visual_adaptive_servo.runner import run_scenario
+
+pytest.importorskip("numba", reason="the compiled backend needs numba")
+
+from visual_adaptive_servo.models import dynamics_kernels  # noqa: E402  (needs numba)
+
+CONFIGS = ["paper_3dof.yaml", "paper_3dof_urdf.yaml", "iiwa_3points.yaml", "panda_2points.yaml"]
+#: simulated seconds of the closed-loop checks
+DURATIONS = {"paper_3dof.yaml": 1.0, "paper_3dof_urdf.yaml": 1.0, "iiwa_3points.yaml": 0.3,
+             "panda_2points.yaml": 0.5}
+LATE_CAMERA = ["sim_node.camera_rate=30.0", "sim_node.camera_latency=0.033",
+               "controller_node.camera_rate=30.0", "controller_node.camera_latency=0.033"]
+CASES = {
+    "as_shipped": [],
+    "no_projection": ["controller_node.projection.enabled=false"],
+    "tight_bounds": [],                 # bounds 1 % around the initial estimates (tighten)
+    "no_latency_compensation": ["controller_node.latency_compensation=false"],
+    "late_camera": LATE_CAMERA,
+    "integral_and_leakage": ["controller_node.reference.integral_rate=0.25",
+                             "controller_node.robust.leakage_kinematic=0.1",
+                             "controller_node.robust.leakage_dynamic=0.1"],
+    "no_integral_no_leakage": ["controller_node.reference.integral_rate=0.0",
+                               "controller_node.robust.leakage_kinematic=0.0",
+                               "controller_node.robust.leakage_dynamic=0.0"],
+    "damping": [],                      # a diagonal joint damping added (damped)
+}
+LAW_FIELDS = ("tau", "s", "qr_dot", "qr_ddot", "J_star", "z_hat")
+RATE_FIELDS = ("x_obs", "a_z_perp", "a_z", "a_d")
+
+
+def assert_close(a, b, where):
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    assert a.shape == b.shape, f"{where}: shape {a.shape} != {b.shape}"
+    scale = np.max(np.abs(b)) if b.size else 0.0
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * scale, err_msg=where)
+
+
+def assert_law_equal(compiled, reference, where):
+    for name in LAW_FIELDS:
+        assert_close(getattr(compiled, name), getattr(reference, name), f"{where}: {name}")
+    for name in RATE_FIELDS:
+        assert_close(getattr(compiled.rates, name), getattr(reference.rates, name),
+                     f"{where}: rate of {name}")
+    assert_close(compiled.model_rate, np.array(reference.model_rate), f"{where}: model_rate")
+    assert_close(compiled.sigma_min, reference.sigma_min, f"{where}: sigma_min")
+    assert compiled.damped == reference.damped, f"{where}: damped"
+    assert compiled.projection_active == reference.projection_active, f"{where}: projection"
+
+
+def reference_law(model, *args):
+    """:func:`control_law` on the numpy tensors and the reference Y_d of ``model``."""
+    model.dynamic_regressor = model.dynamic_regressor_numpy
+    try:
+        return control_law(model, *args)
+    finally:
+        del model.dynamic_regressor
+
+
+def scenario_for(name, case):
+    scenario = load_scenario(os.path.join(ROOT, "config", name), CASES[case])
+    config = scenario.controller
+    if case == "tight_bounds":
+        changes = {"projection.enabled": True}
+        for what in ("a_z_perp", "a_z", "a_d"):
+            init = np.asarray(getattr(config, f"{what}_init"), dtype=float)
+            changes[f"projection.{what}_min"] = (init - 0.01 * np.abs(init) - 1e-12).tolist()
+            changes[f"projection.{what}_max"] = (init + 0.01 * np.abs(init) + 1e-12).tolist()
+        config = config.with_changes(**changes)
+    elif case == "damping":
+        config = config.with_changes(**{"joint_damping.diagonal": [0.5] * config.model.n})
+    return dataclasses.replace(scenario, controller=config)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("name", CONFIGS)
+def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(name, case, tmp_path,
+                                                                      monkeypatch):
+    scenario = scenario_for(name, case)
+    model = scenario.controller.model
+    assert model.backend == "compiled"
+    reference_tensors = reference_of(model)
+    original = AdaptiveVisualTracker._law
+    seen = {"samples": 0, "projected": 0, "clamped": 0, "damped_D": 0, "integral": 0}
+
+    def checked(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection,
+                e_int=None):
+        assert self._compiled_law() is not None, "the tracker runs the numpy law"
+        out = original(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int)
+        kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
+        reference = reference_law(model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                                  projection, self.config["min_singular_value"],
+                                  reference_tensors(q, qd),
+                                  (kappa, e_int) if kappa > 0.0 else None)
+        assert_law_equal(out, reference, f"{name} {case} t={t:.4f}")
+        seen["samples"] += 1
+        seen["projected"] += out.projection_active
+        seen["clamped"] += projection is not None
+        seen["damped_D"] += self.gains.D is not None
+        seen["integral"] += kappa > 0.0
+        return out
+
+    monkeypatch.setattr(AdaptiveVisualTracker, "_law", checked)
+    summary = run_scenario(scenario, str(tmp_path), DURATIONS[name], progress=False,
+                           record=False, plots=False)
+    assert not summary["diverged"]
+    # every accepted sample went through the law (the late camera's first 33 ms have none)
+    accepted = summary["steps"] - summary["rejected"]
+    assert seen["samples"] >= accepted >= 0.8 * summary["steps"]
+    # the options the case is about were in force
+    if case == "tight_bounds":
+        assert seen["projected"] > 0 and seen["clamped"] > 0
+    if case == "no_projection":
+        assert seen["clamped"] == 0
+    if case == "damping":
+        assert seen["damped_D"] == seen["samples"]
+    if case == "integral_and_leakage":
+        assert seen["integral"] == seen["samples"]
+        assert scenario.controller["robust.leakage_dynamic"] > 0.0
+    if case == "no_integral_no_leakage":
+        assert seen["integral"] == 0
+
+
+@pytest.fixture(scope="module", params=CONFIGS)
+def shipped(request):
+    return request.param, load_scenario(os.path.join(ROOT, "config", request.param))
+
+
+def test_compiled_law_equals_numpy_at_random_inputs_damped_and_projected(shipped, rng):
+    # states around the start: pixels within a few px of the true ones, estimates 10 % off;
+    # a large min_singular_value damps the pseudo-inverse, bounds at the estimates block
+    # rates; integral action, leakage and D on and off
+    name, scenario = shipped
+    config, model = scenario.controller, scenario.controller.model
+    tracker = AdaptiveVisualTracker(config)
+    q0 = np.asarray(scenario.sim["initial_positions"], dtype=float)
+    tracker.start(q0)
+    law = tracker._compiled_law()
+    assert law is not None
+    n, m2 = model.n, 2 * model.m
+    init = [np.asarray(getattr(config, f"{w}_init"), dtype=float)
+            for w in ("a_z_perp", "a_z", "a_d")]
+    projection = Projection(init[0], init[0], init[1] - 1.0, init[1] + 1.0, init[2], init[2],
+                            min_depth=1e3)
+    D = np.diag(rng.uniform(0.1, 2.0, n))
+    leakage = Leakage(0.3, 0.2, *(v * 1.1 for v in init))
+    checked = {"damped": 0, "projected": 0}
+    for k in range(100):
+        q = q0 + rng.uniform(-0.1, 0.1, n)
+        qd = rng.normal(scale=0.2, size=n)
+        x = model.project(q)[0]
+        state = EstimatorState(x + rng.normal(scale=0.5, size=m2),
+                               *(v * rng.uniform(0.9, 1.1, v.size) for v in init))
+        xd, xd_dot, xd_ddot = (x + rng.normal(scale=1.0, size=m2),
+                               rng.normal(scale=5.0, size=m2), rng.normal(scale=5.0, size=m2))
+        gains = replace(tracker.gains, D=D if k % 2 else None,
+                        leakage=leakage if k % 3 else None)
+        use_projection = projection if k % 4 else None
+        integral = (5.0, rng.normal(size=m2)) if k % 5 else None
+        msv = 1e6 if k % 2 else 0.0
+        tensors = model.kinematic_tensors(q, qd)
+        out = _law_output(law(gains, state, q, qd, x, xd, xd_dot, xd_ddot, use_projection, msv,
+                              tensors, integral))
+        reference = reference_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                                  use_projection, msv, reference_of(model)(q, qd), integral)
+        assert_law_equal(out, reference, f"{name} #{k}")
+        checked["damped"] += out.damped
+        checked["projected"] += out.projection_active
+    assert checked["damped"] == 50 and checked["projected"] >= 40
+
+
+def test_tracker_follows_the_models_backend():
+    config = load_scenario(os.path.join(ROOT, "config", "paper_3dof.yaml")).controller
+    tracker = AdaptiveVisualTracker(config)
+    assert tracker._compiled_law() is not None
+    config.model.set_backend("numpy")
+    try:
+        assert tracker._compiled_law() is None
+    finally:
+        config.model.set_backend("compiled")
+    assert tracker._compiled_law() is not None
+
+
+# -- the dynamic regressors ------------------------------------------------------------------
+def random_motions(rng, n, count=100):
+    for _ in range(count):
+        yield (rng.uniform(-np.pi, np.pi, n), *rng.normal(scale=1.5, size=(3, n)))
+
+
+@pytest.fixture(scope="module")
+def synthetic_urdf(tmp_path_factory):
+    path = tmp_path_factory.mktemp("urdf") / "synthetic.urdf"
+    path.write_text(SYNTHETIC)
+    return str(path)
+
+
+def urdf_models(synthetic_urdf):
+    out = []
+    for name in CONFIGS[1:]:
+        model = load_scenario(os.path.join(ROOT, "config", name)).controller.model
+        out.append((name, model.dynamics))
+    # fixed joints, a prismatic joint; full (10 n) and base parameters
+    for reduce in (True, False):
+        out.append((f"synthetic reduce={reduce}",
+                    RigidBodyDynamics(synthetic_urdf, "base", "tool", reduce=reduce)))
+    return out
+
+
+def test_compiled_chain_regressor_equals_pinocchio(synthetic_urdf, rng):
+    for name, dynamics in urdf_models(synthetic_urdf):
+        constants = dynamics.kernel_constants()
+        assert constants[2].shape == (dynamics.n, 6)
+        for k, (q, qd, xi, xi_dot) in enumerate(random_motions(rng, dynamics.n)):
+            assert_close(dynamics_kernels.chain_regressor(q, qd, xi, xi_dot, *constants),
+                         dynamics.regressor(q, qd, xi, xi_dot), f"{name} #{k}")
+
+
+def test_chain_contractions_equal_the_regressor_times_a_vector(synthetic_urdf, rng):
+    # tau = Y_d a_d and Y_d^T r without Y_d, against Pinocchio's Y_d
+    for name, dynamics in urdf_models(synthetic_urdf):
+        constants = dynamics.kernel_constants()
+        for k, (q, qd, xi, xi_dot) in enumerate(random_motions(rng, dynamics.n, 50)):
+            a_d, r = rng.normal(size=dynamics.p_d), rng.normal(size=dynamics.n)
+            tau, Ytr = np.empty(dynamics.n), np.empty(dynamics.p_d)
+            dynamics_kernels.chain_contractions(q, qd, xi, xi_dot, r, a_d, *constants, tau, Ytr)
+            Y = dynamics.regressor(q, qd, xi, xi_dot)
+            assert_close(tau, Y.dot(a_d), f"{name} #{k}: Y a")
+            assert_close(Ytr, r.dot(Y), f"{name} #{k}: Y^T r")
+
+
+def test_compiled_regressor_is_the_models_and_the_reference_stays(rng):
+    paper = PaperRRRCamera(backend="compiled")
+    for k, (q, qd, xi, xi_dot) in enumerate(random_motions(rng, 3)):
+        Y = paper.dynamic_regressor(q, qd, xi, xi_dot)
+        assert_close(Y, paper.dynamic_regressor_numpy(q, qd, xi, xi_dot), f"paper #{k}")
+        assert_close(Y, paper.generic_dynamic_regressor(q, qd, xi, xi_dot), f"paper #{k}")
+        a_d, r = rng.normal(size=8), rng.normal(size=3)
+        tau, Ytr = np.empty(3), np.empty(8)
+        dynamics_kernels.paper_contractions(q, qd, xi, xi_dot, r, a_d, tau, Ytr)
+        assert_close(tau, Y.dot(a_d), f"paper #{k}: Y a")
+        assert_close(Ytr, r.dot(Y), f"paper #{k}: Y^T r")
+    model = load_scenario(os.path.join(ROOT, "config", "iiwa_3points.yaml")).controller.model
+    assert isinstance(model, UrdfArmCamera) and model.dynamics_kernel() is not None
+    q, qd, xi, xi_dot = next(random_motions(rng, model.n))
+    assert_close(model.dynamic_regressor(q, qd, xi, xi_dot),
+                 model.dynamics.regressor(q, qd, xi, xi_dot), "iiwa")
+    model.set_backend("numpy")
+    assert model.dynamics_kernel() is None
+    with pytest.raises(ValueError, match=r"need shape \(3,\)"):
+        paper.dynamic_regressor(np.zeros(2), np.zeros(3), np.zeros(3), np.zeros(3))
