@@ -55,51 +55,60 @@ def _cross3(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
-@numba.njit(cache=False, error_model="numpy")
-def _kinematics(q, qd, qdd, R_J, p_J, S, revolute, a0, with_gravity, R, p, v, a):
-    """Forward pass: each joint frame's pose in its parent (R, p) and its v, a (6-vectors).
+#: columns of a row of ``joints`` (:meth:`.rigid_body.RigidBodyDynamics.kernel_constants`):
+#: the placement's rotation (row-major) and translation, the motion subspace, revolute
+JOINT_R, JOINT_P, JOINT_S, JOINT_REVOLUTE, JOINT_WIDTH = 0, 9, 12, 18, 19
 
-    Joint i's frame sits at the placement (R_J, p_J) in its parent's, moved by the
-    joint: rotated by q about the axis S_ang (revolute) or shifted by q S_lin.
+
+@numba.njit(cache=False, error_model="numpy")
+def _poses(q, joints, R, p):
+    """Each joint frame's pose in its parent's: R (n, 3, 3), p (n, 3).
+
+    Joint i's frame sits at its placement (R_J, p_J) in its parent's, moved by
+    the joint: rotated by q_i about the axis S_ang (revolute, R = R_J Rot) or
+    shifted by q_i S_lin (prismatic, p = p_J + R_J S_lin q_i).
     """
-    n = q.shape[0]
+    for i in range(q.shape[0]):
+        J = joints[i]
+        k0, k1, k2 = J[JOINT_S + 3], J[JOINT_S + 4], J[JOINT_S + 5]
+        if J[JOINT_REVOLUTE] != 0.0:
+            # Rot(k, q) = cos q I + sin q [k]x + (1 - cos q) k k^T for the unit axis k
+            s, c = math.sin(q[i]), math.cos(q[i])
+            d = 1.0 - c
+            r00, r01, r02 = c + d * k0 * k0, d * k0 * k1 - s * k2, d * k0 * k2 + s * k1
+            r10, r11, r12 = d * k1 * k0 + s * k2, c + d * k1 * k1, d * k1 * k2 - s * k0
+            r20, r21, r22 = d * k2 * k0 - s * k1, d * k2 * k1 + s * k0, c + d * k2 * k2
+            for r in range(3):
+                a, b, e = J[3 * r], J[3 * r + 1], J[3 * r + 2]
+                R[i, r, 0] = a * r00 + b * r10 + e * r20
+                R[i, r, 1] = a * r01 + b * r11 + e * r21
+                R[i, r, 2] = a * r02 + b * r12 + e * r22
+                p[i, r] = J[JOINT_P + r]
+        else:
+            l0, l1, l2 = J[JOINT_S], J[JOINT_S + 1], J[JOINT_S + 2]
+            for r in range(3):
+                a, b, e = J[3 * r], J[3 * r + 1], J[3 * r + 2]
+                R[i, r, 0], R[i, r, 1], R[i, r, 2] = a, b, e
+                p[i, r] = J[JOINT_P + r] + q[i] * (a * l0 + b * l1 + e * l2)
+
+
+@numba.njit(cache=False, error_model="numpy")
+def _motion(joints, R, p, qd, qdd, g0, g1, g2, v, a):
+    """Forward pass: each joint frame's spatial velocity v and acceleration a (n, 6).
+
+    The base moves with linear acceleration (g0, g1, g2) (-gravity, or 0) and no
+    velocity; v_i = X_i v_parent + S_i qd_i, a_i = X_i a_parent + S_i qdd_i +
+    v_i x S_i qd_i, with X_i: ang' = R^T ang, lin' = R^T (lin + ang x p).
+    """
     pw0, pw1, pw2 = 0.0, 0.0, 0.0            # parent's angular velocity
     pv0, pv1, pv2 = 0.0, 0.0, 0.0            # parent's linear velocity
     pal0, pal1, pal2 = 0.0, 0.0, 0.0         # parent's angular acceleration
-    pa0, pa1, pa2 = 0.0, 0.0, 0.0            # parent's linear acceleration
-    if with_gravity:
-        pa0, pa1, pa2 = a0[0], a0[1], a0[2]  # -gravity: the base accelerates upwards
-    rot = np.empty((3, 3))
-    for i in range(n):
-        sl0, sl1, sl2 = S[i, 0], S[i, 1], S[i, 2]
-        sa0, sa1, sa2 = S[i, 3], S[i, 4], S[i, 5]
-        if revolute[i] != 0.0:
-            # Rot(axis, q) = I + sin q [k]x + (1 - cos q) [k]x^2 = cos q I + sin q [k]x
-            #                + (1 - cos q) k k^T for a unit axis k
-            s, c = math.sin(q[i]), math.cos(q[i])
-            d = 1.0 - c
-            rot[0, 0] = c + d * sa0 * sa0
-            rot[0, 1] = d * sa0 * sa1 - s * sa2
-            rot[0, 2] = d * sa0 * sa2 + s * sa1
-            rot[1, 0] = d * sa1 * sa0 + s * sa2
-            rot[1, 1] = c + d * sa1 * sa1
-            rot[1, 2] = d * sa1 * sa2 - s * sa0
-            rot[2, 0] = d * sa2 * sa0 - s * sa1
-            rot[2, 1] = d * sa2 * sa1 + s * sa0
-            rot[2, 2] = c + d * sa2 * sa2
-            for r in range(3):
-                for col in range(3):
-                    R[i, r, col] = (R_J[i, r, 0] * rot[0, col] + R_J[i, r, 1] * rot[1, col]
-                                    + R_J[i, r, 2] * rot[2, col])
-                p[i, r] = p_J[i, r]
-        else:
-            for r in range(3):
-                for col in range(3):
-                    R[i, r, col] = R_J[i, r, col]
-                p[i, r] = p_J[i, r] + q[i] * (R_J[i, r, 0] * sl0 + R_J[i, r, 1] * sl1
-                                              + R_J[i, r, 2] * sl2)
+    pa0, pa1, pa2 = g0, g1, g2               # parent's linear acceleration
+    for i in range(qd.shape[0]):
+        J = joints[i]
+        sl0, sl1, sl2 = J[JOINT_S], J[JOINT_S + 1], J[JOINT_S + 2]
+        sa0, sa1, sa2 = J[JOINT_S + 3], J[JOINT_S + 4], J[JOINT_S + 5]
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        # motion transform parent -> i: ang' = R^T ang, lin' = R^T (lin + ang x p)
         cx, cy, cz = _cross3(pw0, pw1, pw2, px, py, pz)
         lx, ly, lz = pv0 + cx, pv1 + cy, pv2 + cz
         dx, dy, dz = _cross3(pal0, pal1, pal2, px, py, pz)
@@ -112,7 +121,7 @@ def _kinematics(q, qd, qdd, R_J, p_J, S, revolute, a0, with_gravity, R, p, v, a)
         v0 = Ri[0, 0] * lx + Ri[1, 0] * ly + Ri[2, 0] * lz + sl0 * rate
         v1 = Ri[0, 1] * lx + Ri[1, 1] * ly + Ri[2, 1] * lz + sl1 * rate
         v2 = Ri[0, 2] * lx + Ri[1, 2] * ly + Ri[2, 2] * lz + sl2 * rate
-        # a = X a_parent + S qdd + v x (S qd): (w x s_lin + v x s_ang, w x s_ang) qd
+        # v x (S qd) = (w x s_lin + v x s_ang, w x s_ang) qd
         c1x, c1y, c1z = _cross3(w0, w1, w2, sl0, sl1, sl2)
         c2x, c2y, c2z = _cross3(v0, v1, v2, sa0, sa1, sa2)
         c3x, c3y, c3z = _cross3(w0, w1, w2, sa0, sa1, sa2)
@@ -130,10 +139,13 @@ def _kinematics(q, qd, qdd, R_J, p_J, S, revolute, a0, with_gravity, R, p, v, a)
 
 @numba.njit(cache=False, error_model="numpy")
 def _body_regressor(v, a, out):
-    """Yb (6, 10): (force; moment about the origin) of one link, columns m, m c, I_O."""
+    """Yb (6, 10): (force; moment about the origin) of one link, columns m, m c, I_O.
+
+    With a_c = a_lin + w x v_lin: m -> (a_c; 0); m c_k -> (alpha x e_k + w x (w x e_k);
+    e_k x a_c); an entry of I_O (basis matrix E) -> (0; E alpha + w x (E w)).
+    """
     v0, v1, v2, w0, w1, w2 = v[0], v[1], v[2], v[3], v[4], v[5]
     l0, l1, l2, al0, al1, al2 = a[0], a[1], a[2], a[3], a[4], a[5]
-    # a_c = a_lin + w x v_lin
     cx, cy, cz = _cross3(w0, w1, w2, v0, v1, v2)
     ac0, ac1, ac2 = l0 + cx, l1 + cy, l2 + cz
     for r in range(6):
@@ -148,7 +160,6 @@ def _body_regressor(v, a, out):
         n0, n1, n2 = _cross3(e0, e1, e2, ac0, ac1, ac2)           # e x a_c
         out[0, 1 + k], out[1, 1 + k], out[2, 1 + k] = f0 + h0, f1 + h1, f2 + h2
         out[3, 1 + k], out[4, 1 + k], out[5, 1 + k] = n0, n1, n2
-    # I_O columns: n = E alpha + w x (E w), E the symmetric basis matrix of the entry
     _inertia_column(out, 4, al0, 0.0, 0.0, w0, 0.0, 0.0, w0, w1, w2)    # Ixx
     _inertia_column(out, 5, al1, al0, 0.0, w1, w0, 0.0, w0, w1, w2)    # Ixy
     _inertia_column(out, 6, 0.0, al1, 0.0, 0.0, w1, 0.0, w0, w1, w2)   # Iyy
@@ -179,23 +190,22 @@ def _to_parent(R, p, F, out):
 
 
 @numba.njit(cache=False, error_model="numpy")
-def _torque_regressor(q, qd, qdd, R_J, p_J, S, revolute, a0, out, scale):
-    """out[:, :] += scale * Y(q, qd, qdd) (n, 10 n), Y a = M qdd + C qd + g (RNEA)."""
-    n = q.shape[0]
-    R = np.empty((n, 3, 3))
-    p = np.empty((n, 3))
+def _torque_regressor(joints, R, p, qd, qdd, a0, out, scale):
+    """out += scale * Y(q, qd, qdd) (n, 10 n), Y a = M qdd + C qd + g (RNEA), poses R, p."""
+    n = qd.shape[0]
     v = np.empty((n, 6))
     a = np.empty((n, 6))
-    _kinematics(q, qd, qdd, R_J, p_J, S, revolute, a0, True, R, p, v, a)
+    _motion(joints, R, p, qd, qdd, a0[0], a0[1], a0[2], v, a)
     F = np.empty((6, 10))
     G = np.empty((6, 10))
     for j in range(n):
         _body_regressor(v[j], a[j], F)
         for i in range(j, -1, -1):
+            S = joints[i, JOINT_S:JOINT_S + 6]
             for col in range(10):
                 acc = 0.0
                 for r in range(6):
-                    acc += S[i, r] * F[r, col]
+                    acc += S[r] * F[r, col]
                 out[i, 10 * j + col] += scale * acc
             if i > 0:
                 _to_parent(R[i], p[i], F, G)
@@ -203,19 +213,21 @@ def _torque_regressor(q, qd, qdd, R_J, p_J, S, revolute, a0, out, scale):
 
 
 @compiled(error_model="numpy")
-def chain_regressor(q, qd, xi, xi_dot, R_J, p_J, S, revolute, a0, columns):
+def chain_regressor(q, qd, xi, xi_dot, joints, a0, columns):
     """Y_d (n, p_d) of Property 4: ``RigidBodyDynamics.regressor`` compiled.
 
     The same two-call polarisation, Y_d = 2 Y(q, (q_dot + xi)/sqrt 8, xi_dot)
     - Y(q, (q_dot - xi)/2, xi_dot), restricted to the base ``columns``.
-    Constants (:meth:`.rigid_body.RigidBodyDynamics.kernel_constants`): joint
-    placements R_J (n, 3, 3), p_J (n, 3), motion subspaces S (n, 6), revolute
-    (n,) 1.0/0.0, a0 (3,) = -gravity.
+    Constants (:meth:`.rigid_body.RigidBodyDynamics.kernel_constants`): ``joints``
+    (n, 19) placements, motion subspaces, revolute flags; a0 (3,) = -gravity.
     """
     n = q.shape[0]
+    R = np.empty((n, 3, 3))
+    p = np.empty((n, 3))
+    _poses(q, joints, R, p)
     full = np.zeros((n, 10 * n))
-    _torque_regressor(q, _INV_SQRT8 * (qd + xi), xi_dot, R_J, p_J, S, revolute, a0, full, 2.0)
-    _torque_regressor(q, 0.5 * (qd - xi), xi_dot, R_J, p_J, S, revolute, a0, full, -1.0)
+    _torque_regressor(joints, R, p, _INV_SQRT8 * (qd + xi), xi_dot, a0, full, 2.0)
+    _torque_regressor(joints, R, p, 0.5 * (qd - xi), xi_dot, a0, full, -1.0)
     out = np.empty((n, columns.shape[0]))
     for i in range(n):
         for c in range(columns.shape[0]):
@@ -224,20 +236,57 @@ def chain_regressor(q, qd, xi, xi_dot, R_J, p_J, S, revolute, a0, columns):
 
 
 @numba.njit(cache=False, error_model="numpy")
-def _body_force(v, a, pi, out):
-    """Yb(v, a) pi (6,): one link's force and moment for its 10 parameters ``pi``."""
-    Yb = np.empty((6, 10))
-    _body_regressor(v, a, Yb)
-    for r in range(6):
-        acc = 0.0
-        for col in range(10):
-            acc += Yb[r, col] * pi[col]
-        out[r] = acc
+def _force_and_transpose(v, a, pi, w, scale, f, Ytw):
+    """f += scale Yb(v, a) pi (6,) and Ytw += scale Yb(v, a)^T w (10,), Yb not formed.
+
+    pi: m, m c, Ixx, Ixy, Iyy, Ixz, Iyz, Izz.  Yb pi = (m a_c + alpha x h + w x (w x h);
+    h x a_c + I alpha + w x (I w)); Yb^T w for w = (wl, wa): a_c . wl,
+    (wl x alpha)_k + w_k (w . wl) - wl_k |w|^2 + (a_c x wa)_k, wa^T E alpha + u^T E w
+    with u = wa x w.
+    """
+    v0, v1, v2, w0, w1, w2 = v[0], v[1], v[2], v[3], v[4], v[5]
+    l0, l1, l2, al0, al1, al2 = a[0], a[1], a[2], a[3], a[4], a[5]
+    cx, cy, cz = _cross3(w0, w1, w2, v0, v1, v2)
+    ac0, ac1, ac2 = l0 + cx, l1 + cy, l2 + cz
+    m, h0, h1, h2 = pi[0], pi[1], pi[2], pi[3]
+    Ixx, Ixy, Iyy, Ixz, Iyz, Izz = pi[4], pi[5], pi[6], pi[7], pi[8], pi[9]
+    t0, t1, t2 = _cross3(al0, al1, al2, h0, h1, h2)
+    g0, g1, g2 = _cross3(w0, w1, w2, h0, h1, h2)
+    u0, u1, u2 = _cross3(w0, w1, w2, g0, g1, g2)
+    f[0] += scale * (m * ac0 + t0 + u0)
+    f[1] += scale * (m * ac1 + t1 + u1)
+    f[2] += scale * (m * ac2 + t2 + u2)
+    n0, n1, n2 = _cross3(h0, h1, h2, ac0, ac1, ac2)
+    ia0 = Ixx * al0 + Ixy * al1 + Ixz * al2
+    ia1 = Ixy * al0 + Iyy * al1 + Iyz * al2
+    ia2 = Ixz * al0 + Iyz * al1 + Izz * al2
+    iw0 = Ixx * w0 + Ixy * w1 + Ixz * w2
+    iw1 = Ixy * w0 + Iyy * w1 + Iyz * w2
+    iw2 = Ixz * w0 + Iyz * w1 + Izz * w2
+    x0, x1, x2 = _cross3(w0, w1, w2, iw0, iw1, iw2)
+    f[3] += scale * (n0 + ia0 + x0)
+    f[4] += scale * (n1 + ia1 + x1)
+    f[5] += scale * (n2 + ia2 + x2)
+    wl0, wl1, wl2, wa0, wa1, wa2 = w[0], w[1], w[2], w[3], w[4], w[5]
+    Ytw[0] += scale * (ac0 * wl0 + ac1 * wl1 + ac2 * wl2)
+    b0, b1, b2 = _cross3(wl0, wl1, wl2, al0, al1, al2)
+    d0, d1, d2 = _cross3(ac0, ac1, ac2, wa0, wa1, wa2)
+    ww = w0 * wl0 + w1 * wl1 + w2 * wl2
+    w2n = w0 * w0 + w1 * w1 + w2 * w2
+    Ytw[1] += scale * (b0 + w0 * ww - wl0 * w2n + d0)
+    Ytw[2] += scale * (b1 + w1 * ww - wl1 * w2n + d1)
+    Ytw[3] += scale * (b2 + w2 * ww - wl2 * w2n + d2)
+    z0, z1, z2 = _cross3(wa0, wa1, wa2, w0, w1, w2)
+    Ytw[4] += scale * (wa0 * al0 + z0 * w0)
+    Ytw[5] += scale * (wa0 * al1 + wa1 * al0 + z0 * w1 + z1 * w0)
+    Ytw[6] += scale * (wa1 * al1 + z1 * w1)
+    Ytw[7] += scale * (wa0 * al2 + wa2 * al0 + z0 * w2 + z2 * w0)
+    Ytw[8] += scale * (wa1 * al2 + wa2 * al1 + z1 * w2 + z2 * w1)
+    Ytw[9] += scale * (wa2 * al2 + z2 * w2)
 
 
 @numba.njit(cache=False, error_model="numpy")
-def chain_contractions(q, qd, xi, xi_dot, r, a_d, R_J, p_J, S, revolute, a0, columns,
-                       tau, Ytr):
+def chain_contractions(q, qd, xi, xi_dot, r, a_d, joints, a0, columns, tau, Ytr):
     """tau = Y_d a_d (n,) and Ytr = Y_d^T r (p_d,) in O(n), without forming Y_d.
 
     Y_d as in :func:`chain_regressor`; a_d fills the base ``columns`` of the
@@ -249,49 +298,35 @@ def chain_contractions(q, qd, xi, xi_dot, r, a_d, R_J, p_J, S, revolute, a0, col
     for c in range(columns.shape[0]):
         pi[columns[c]] = a_d[c]
     full_tr = np.zeros(nf)
-    for i in range(n):
-        tau[i] = 0.0
     R = np.empty((n, 3, 3))
     p = np.empty((n, 3))
-    v = np.empty((n, 6))
-    a = np.empty((n, 6))
+    _poses(q, joints, R, p)
     # w_j: the motion the joint rates r give link j (the transpose of the force recursion)
     wr = np.empty((n, 6))
-    Rw = np.empty((n, 3, 3))
-    pw = np.empty((n, 3))
-    zero = np.zeros(n)
-    _kinematics(q, r, zero, R_J, p_J, S, revolute, a0, False, Rw, pw, wr, a)
-    Yb = np.empty((6, 10))
-    f = np.empty((n, 6))
-    fp = np.empty((6, 1))
+    v = np.empty((n, 6))
+    a = np.empty((n, 6))
+    _motion(joints, R, p, r, np.zeros(n), 0.0, 0.0, 0.0, wr, a)
+    f = np.zeros((n, 6))
     for pol in range(2):
         if pol == 0:
             vel, scale = _INV_SQRT8 * (qd + xi), 2.0
         else:
             vel, scale = 0.5 * (qd - xi), -1.0
-        _kinematics(q, vel, xi_dot, R_J, p_J, S, revolute, a0, True, R, p, v, a)
+        _motion(joints, R, p, vel, xi_dot, a0[0], a0[1], a0[2], v, a)
         for j in range(n):
-            _body_regressor(v[j], a[j], Yb)
-            for col in range(10):
-                acc = 0.0
-                for k in range(6):
-                    acc += Yb[k, col] * wr[j, k]
-                full_tr[10 * j + col] += scale * acc
+            _force_and_transpose(v[j], a[j], pi[10 * j:10 * j + 10], wr[j], scale, f[j],
+                                 full_tr[10 * j:10 * j + 10])
+    # backward: F_i = f_i + X* F_{i+1}; tau_i = S_i^T F_i
+    fp = np.empty((6, 1))
+    for i in range(n - 1, -1, -1):
+        acc = 0.0
+        for k in range(6):
+            acc += joints[i, JOINT_S + k] * f[i, k]
+        tau[i] = acc
+        if i > 0:
+            _to_parent(R[i], p[i], f[i].reshape(6, 1), fp)
             for k in range(6):
-                acc = 0.0
-                for col in range(10):
-                    acc += Yb[k, col] * pi[10 * j + col]
-                f[j, k] = acc
-        # backward: F_i = f_i + X* F_{i+1}; tau_i += scale S_i^T F_i
-        for i in range(n - 1, -1, -1):
-            acc = 0.0
-            for k in range(6):
-                acc += S[i, k] * f[i, k]
-            tau[i] += scale * acc
-            if i > 0:
-                _to_parent(R[i], p[i], f[i].reshape(6, 1), fp)
-                for k in range(6):
-                    f[i - 1, k] += fp[k, 0]
+                f[i - 1, k] += fp[k, 0]
     for c in range(columns.shape[0]):
         Ytr[c] = full_tr[columns[c]]
 

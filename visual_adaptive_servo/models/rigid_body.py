@@ -230,11 +230,12 @@ class RigidBodyDynamics:
     def kernel_constants(self):
         """The constant arrays of :func:`.dynamics_kernels.chain_regressor` for this chain.
 
-        ``(R_J, p_J, S, revolute, a0, columns)``: each joint's placement in its
-        parent's frame (n, 3, 3), (n, 3), its motion subspace (n, 6: linear,
-        angular, Pinocchio's joint velocity for a unit rate at the neutral
-        configuration), 1.0 for a revolute joint, -gravity (3,) and the base
-        columns.  ValueError when the chain is not one serial line of 1-dof joints.
+        ``(joints, a0, columns)``: a row per joint (n, 19) with its placement in
+        its parent's frame (rotation row-major, translation), its motion subspace
+        (linear, angular: Pinocchio's joint velocity for a unit rate at the
+        neutral configuration) and 1.0 for a revolute joint; -gravity (3,); the
+        base columns.  ValueError when the chain is not one serial line of 1-dof
+        joints.
         """
         model = self.model
         n = self.n
@@ -259,8 +260,9 @@ class RigidBodyDynamics:
         if not np.all(np.where(revolute > 0.0, linear < 1e-12, angular < 1e-12)):
             raise ValueError("a joint is neither a pure rotation nor a pure translation")
         a0 = -np.array(model.gravity.linear, dtype=float)
-        return (np.ascontiguousarray(R_J), np.ascontiguousarray(p_J), np.ascontiguousarray(S),
-                revolute, a0, np.ascontiguousarray(self.base_columns, dtype=np.intp))
+        joints = np.hstack([R_J.reshape(n, 9), p_J, S, revolute[:, None]])
+        return (np.ascontiguousarray(joints), a0,
+                np.ascontiguousarray(self.base_columns, dtype=np.intp))
 
     def parameters(self):
         """True dynamic parameters a_d (p_d,) from the URDF inertias (a_base = E a_full)."""
