@@ -105,9 +105,11 @@ class EstimatorState:
                               self.a_z + dt * rates.a_z, self.a_d + dt * rates.a_d)
 
     def is_finite(self):
-        # math.isfinite over Python floats: np.all(np.isfinite(.)) costs ~3 us per tiny array
-        return all(map(isfinite, self.x_obs.tolist() + self.a_z_perp.tolist()
-                       + self.a_z.tolist() + self.a_d.tolist()))
+        # one Python sum: NaN and inf propagate through it, so it is finite exactly when every
+        # entry is (short of an overflow past 1.8e308, which counts as not finite); 2-3x
+        # cheaper than math.isfinite per entry for the iiwa's 149, far cheaper than np.isfinite
+        return isfinite(sum(self.x_obs.tolist() + self.a_z_perp.tolist()
+                            + self.a_z.tolist() + self.a_d.tolist()))
 
 
 @dataclass(frozen=True)
