@@ -916,16 +916,21 @@ class AdaptiveVisualTracker:
         """:class:`~.law_kernels.CompiledLaw` when the model runs the compiled backend, else None.
 
         Then :meth:`_law` evaluates the compiled kernel instead of :func:`control_law`
-        (the same law, tested equal to 1e-12); followed when the model's backend changes.
+        (the same law, tested equal to 1e-12), and the frame predictor re-runs a late
+        frame compiled (:mod:`.prediction_kernels`); followed when the model's backend
+        changes.
         """
         backend = getattr(self.model, "backend", "numpy")
         if backend != self._law_backend:
             self._law_backend, self._law_kernel = backend, None
+            self.predictor.rerun = None
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
                 from .law_kernels import CompiledLaw
+                from .prediction_kernels import rerun
 
                 self._law_kernel = CompiledLaw(self.model)
+                self.predictor.rerun = rerun    # a late frame's re-run, compiled too
         return self._law_kernel
 
     def _reject(self, t, q, qd, problems):
