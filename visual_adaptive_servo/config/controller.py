@@ -85,7 +85,7 @@ CONTROLLER_PARAMS = (
     ParamSpec("gain_design.K_fraction", 0.05, "float",
               "Derived K: the largest scalar with J*^T K J* <= this x the joint damping at the "
               "first sample.", 1e-9, 1.0),
-    ParamSpec("gain_design.kinematic_rate", 0.1, "float",
+    ParamSpec("gain_design.kinematic_rate", 0.03, "float",
               "Derived Gamma_z_perp, Gamma_z: the kinematic estimates converge at this x gamma "
               "(regressor-normalised, docs/gain_design.md).", 0.0, 10.0),
     ParamSpec("gain_design.dynamic_rate", 0.3, "float",
