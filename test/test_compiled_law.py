@@ -25,7 +25,8 @@ latency compensation, with a 30 Hz camera 33 ms late, with and without the
 integral action and leakage, with and without joint damping -- and at random
 inputs with a damped pseudo-inverse.  The frame predictor's compiled re-run of a
 late frame against its numpy closed form, at every sample of a 1 kHz stream with
-late frames and in a closed loop.  "1e-12 relative" is relative to each
+late frames and in a closed loop; with and without the image-motion scale.
+"1e-12 relative" is relative to each
 output's largest entry (an entry that is zero in exact arithmetic comes out
 as 1e-17 in one and 0 in the other).
 """
@@ -74,6 +75,12 @@ CASES = {
                                "controller_node.robust.leakage_kinematic=0.0",
                                "controller_node.robust.leakage_dynamic=0.0"],
     "damping": [],                      # a diagonal joint damping added (damped)
+    # learnt within the short runs: a short window, fast, from little motion
+    "motion_scale": ["controller_node.motion_scale.enabled=true",
+                     "controller_node.motion_scale.window=0.1",
+                     "controller_node.motion_scale.rate=20.0",
+                     "controller_node.motion_scale.min_motion=0.0"] + LATE_CAMERA,
+    "no_motion_scale": ["controller_node.motion_scale.enabled=false"],
 }
 LAW_FIELDS = ("tau", "s", "qr_dot", "qr_ddot", "J_star", "z_hat")
 RATE_FIELDS = ("x_obs", "a_z_perp", "a_z", "a_d")
@@ -131,23 +138,26 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
     assert model.backend == "compiled"
     reference_tensors = reference_of(model)
     original = AdaptiveVisualTracker._law
-    seen = {"samples": 0, "projected": 0, "clamped": 0, "damped_D": 0, "integral": 0}
+    seen = {"samples": 0, "projected": 0, "clamped": 0, "damped_D": 0, "integral": 0,
+            "scaled": 0}
 
     def checked(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection,
                 e_int=None):
         assert self._compiled_law() is not None, "the tracker runs the numpy law"
         out = original(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int)
         kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
+        motion = None if self.scale is None else (self.scale.value, self.scale.derivative)
         reference = reference_law(model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
                                   projection, self.config["min_singular_value"],
                                   reference_tensors(q, qd),
-                                  (kappa, e_int) if kappa > 0.0 else None)
+                                  (kappa, e_int) if kappa > 0.0 else None, motion)
         assert_law_equal(out, reference, f"{name} {case} t={t:.4f}")
         seen["samples"] += 1
         seen["projected"] += out.projection_active
         seen["clamped"] += projection is not None
         seen["damped_D"] += self.gains.D is not None
         seen["integral"] += kappa > 0.0
+        seen["scaled"] += motion is not None and motion != (1.0, 0.0)
         return out
 
     monkeypatch.setattr(AdaptiveVisualTracker, "_law", checked)
@@ -169,6 +179,8 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
         assert scenario.controller["robust.leakage_dynamic"] > 0.0
     if case == "no_integral_no_leakage":
         assert seen["integral"] == 0
+    if case == "motion_scale":
+        assert seen["scaled"] > 0, "the image-motion scale never departed from 1"
 
 
 @pytest.fixture(scope="module", params=CONFIGS)
@@ -208,11 +220,13 @@ def test_compiled_law_equals_numpy_at_random_inputs_damped_and_projected(shipped
         use_projection = projection if k % 4 else None
         integral = (5.0, rng.normal(size=m2)) if k % 5 else None
         msv = 1e6 if k % 2 else 0.0
+        motion = (rng.uniform(0.8, 1.25), rng.normal(scale=0.5)) if k % 3 == 1 else None
         tensors = model.kinematic_tensors(q, qd)
         out = _law_output(law(gains, state, q, qd, x, xd, xd_dot, xd_ddot, use_projection, msv,
-                              tensors, integral))
+                              tensors, integral, motion))
         reference = reference_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                                  use_projection, msv, reference_of(model)(q, qd), integral)
+                                  use_projection, msv, reference_of(model)(q, qd), integral,
+                                  motion)
         assert_law_equal(out, reference, f"{name} #{k}")
         checked["damped"] += out.damped
         checked["projected"] += out.projection_active

@@ -189,10 +189,12 @@ def _inverse(G):
 # single accumulator waits ~4 cycles per add); no assumption about NaN or inf is made
 @compiled(error_model="numpy", fastmath={"reassoc", "contract"})
 def law(H, dH, dH_rate, W, W_rate, x_obs, a_perp, a_z, a_d, q, qd, x, xd, xd_dot, xd_ddot,
-        e_int, gains, bounds, scalars, project, joints, columns, out):
+        e_int, scale, scale_dot, gains, bounds, scalars, project, joints, columns, out):
     """The paper's law at one instant, as :func:`.controller.control_law` computes it.
 
-    Few arguments, because numba's dispatcher checks each one at every call:
+    ``scale``, ``scale_dot``: the image-motion scale s and its rate (1, 0: off; see
+    ``control_law``'s ``motion_scale``).  Few arguments otherwise, because numba's
+    dispatcher checks each one at every call:
     ``gains`` is K (2m), Gamma_d (p_d), Gamma_z_perp (p_perp), Gamma_z (p_z), the
     leakage's a_z_perp(0), a_z(0), a_d(0) and D (n x n, row-major) end to end;
     ``bounds`` the projection's a_z_perp, a_z, a_d minima and maxima (in that
@@ -293,7 +295,7 @@ def law(H, dH, dH_rate, W, W_rate, x_obs, a_perp, a_z, a_d, q, qd, x, xd, xd_dot
         for k in range(n):
             acc += J_perp[r, k] * qd[k]
         rate[0, r], rate[1, r], rate[2, r] = acc, zr, zh
-        x_obs_model = (acc - zr * x_mid) / zh
+        x_obs_model = scale * ((acc - zr * x_mid) / zh)
         x_obs_dot[r] = x_obs_model - alpha * dx_obs[r]
         x_r_dot[r] = xd_dot[r] - gamma * e_obs
         x_r_ddot[r] = xd_ddot[r] - gamma * (x_obs_dot[r] - xd_dot[r])
@@ -303,6 +305,10 @@ def law(H, dH, dH_rate, W, W_rate, x_obs, a_perp, a_z, a_d, q, qd, x, xd, xd_dot
         w_H[r] = x_obs_model * dx_obs[r] - x_r_dot[r] * dx[r]
         w_H_rate[r] = x_mid * dx_obs[r] - u[r] * dx[r]
         u_dot[r] = 0.5 * (x_obs_dot[r] + xd_dot[r])
+        if scale != 1.0 or scale_dot != 0.0:
+            # the motion scale: eq (18) maps x_r_dot / s, eq (19) its exact derivative
+            x_r_ddot[r] = x_r_ddot[r] / scale - (scale_dot / scale ** 2) * x_r_dot[r]
+            x_r_dot[r] = x_r_dot[r] / scale
     for p in range(pp):
         a_perp_dot[p] = 0.0
     Y_perp = np.empty(pp)                            # row r of Y_z_perp = q_dot . W
@@ -543,7 +549,7 @@ class CompiledLaw:
         scalars = np.concatenate([np.ones(8), [float(self.kind)], self.gravity])
         try:
             law(*model.kinematic_tensors(zero, zero), pixels, np.ones(p_perp), np.ones(p_z),
-                np.ones(p_d), zero, zero, pixels, pixels, pixels, pixels, pixels, gains,
+                np.ones(p_d), zero, zero, pixels, pixels, pixels, pixels, pixels, 1.0, 0.0, gains,
                 self._bounds, scalars, False, *self.chain, np.empty(self._size))
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
@@ -568,13 +574,14 @@ class CompiledLaw:
         return flat, scalars
 
     def __call__(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                 min_singular_value, tensors, integral):
+                 min_singular_value, tensors, integral, motion_scale=None):
         """The outputs of :func:`law` for the inputs of :func:`.controller.control_law`.
 
         (tau, x_obs_dot, a_perp_dot, a_z_dot, a_d_dot, s, qr_dot, qr_ddot, J_star, z_hat,
         model_rate, sigma_min, damped, projection_active): views of one new array.
         """
         kappa, e_int = integral if integral is not None else (0.0, self._zeros)
+        scale, scale_dot = motion_scale if motion_scale is not None else (1.0, 0.0)
         if projection is not None and projection is not self._projection:
             self._projection = projection
             self._bounds = np.concatenate([
@@ -591,7 +598,8 @@ class CompiledLaw:
         out = np.empty(self._size)
         sigma_min, damped, active = law(
             *tensors, state.x_obs, state.a_z_perp, state.a_z, state.a_d, q, qd, x, xd, xd_dot,
-            xd_ddot, e_int, flat, self._bounds, scalars, projection is not None, *self.chain, out)
+            xd_ddot, e_int, float(scale), float(scale_dot), flat, self._bounds, scalars,
+            projection is not None, *self.chain, out)
         m2 = 2 * self.m
         return (*[out[s] for s in self._slices], out[self._J_star].reshape(m2, self.n),
                 out[self._z_hat], out[self._rate].reshape(3, m2), sigma_min, damped, active)
