@@ -17,12 +17,13 @@
 What it measures, on a rendered scenario (default config/iiwa_apriltag.yaml):
 
 * per picture, the arm moved along a path of ``--frames`` poses around its start
-  (0.05 rad per joint, the tag a few pixels per frame as at 30 Hz), each part timed
-  on its own with ``time.perf_counter`` and the median reported: the TinyRenderer's
-  whole 640 x 480 picture of the arm's client and its tag window
-  (``render.tag_window``), the depth composite over the surroundings, the noise and
-  gamma, the detector (window search, edge fit), and ``PictureMaker.picture`` with
-  ``whole_every`` 1 (every picture whole) and the file's value (or ``--whole-every``);
+  (0.05 rad per joint, the tag 5-20 px a frame), each part timed on its own with
+  ``time.perf_counter`` and the median reported: the TinyRenderer's whole 640 x 480
+  picture of the arm's client, the whole scene (that and the depth composite over
+  the surroundings), the scene in the tag window (``render.tag_window``, the links
+  outside it left out), the detector (window search, edge fit), and the whole
+  ``PictureMaker.picture`` (noise and gamma included) with ``whole_every`` 1 (every
+  picture whole) and the file's value (or ``--whole-every``);
 * the closed loop: :func:`run_scenario` for ``--duration`` simulated seconds, without
   recording and plots, for ``whole_every`` 1 and the file's value: simulated seconds
   per wall second (the summary's ``realtime_factor``) and per CPU second of the
@@ -66,12 +67,13 @@ def _median_ms(times):
     return float(1e3 * np.median(times)) if times else float("nan")
 
 
-def picture_parts(config, frames):
+def picture_parts(config, frames, every):
     """Median milliseconds of each part of one picture along the path."""
-    scenario = load_scenario(config, ["sim_node.picture.whole_every=1"])
+    scenario = load_scenario(config, [f"sim_node.picture.whole_every={every}"])
     sim = Simulator(scenario.sim)
-    parts = {k: [] for k in ("whole arm render", "window arm render", "composite (whole)",
-                             "noise and gamma", "detection", "picture, whole_every 1")}
+    parts = {k: [] for k in ("whole arm render", "whole scene (render, composite)",
+                             "window scene (render without the links outside, composite)",
+                             "detection (window search, edge fit)")}
     window_pixels = []
     try:
         maker, detector = sim.pictures, scenario.detector.detector()
@@ -80,27 +82,23 @@ def picture_parts(config, frames):
             sim._show_markers()
             t0 = time.perf_counter()
             maker._render(maker.client)
-            parts["whole arm render"].append(time.perf_counter() - t0)
+            t1 = time.perf_counter()
+            maker._scene()
+            t2 = time.perf_counter()
+            parts["whole arm render"].append(t1 - t0)
+            parts["whole scene (render, composite)"].append(t2 - t1)
             window = render.tag_window(sim._plate_outline(), sim.camera.width,
                                        sim.camera.height)
             if window is not None:
                 t0 = time.perf_counter()
-                maker._render(maker.client, window)
-                parts["window arm render"].append(time.perf_counter() - t0)
+                maker._scene(window)
+                parts["window scene (render without the links outside, composite)"].append(
+                    time.perf_counter() - t0)
                 window_pixels.append((window[2] - window[0]) * (window[3] - window[1]))
-            t0 = time.perf_counter()
-            maker._composite()
-            parts["composite (whole)"].append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
             picture = maker.picture()
-            t1 = time.perf_counter()
+            t0 = time.perf_counter()
             detector.detect(picture)
-            t2 = time.perf_counter()
-            parts["picture, whole_every 1"].append(t1 - t0)
-            parts["detection"].append(t2 - t1)
-        noise = [p - c for p, c in zip(parts["picture, whole_every 1"],
-                                       parts["composite (whole)"])]
-        parts["noise and gamma"] = noise
+            parts["detection (window search, edge fit)"].append(time.perf_counter() - t0)
     finally:
         sim.close()
     result = {name: _median_ms(times) for name, times in parts.items()}
@@ -109,11 +107,9 @@ def picture_parts(config, frames):
     return result
 
 
-def windowed_pictures(config, frames, every=None):
-    """Median milliseconds of ``picture()`` with ``whole_every`` (default the file's)."""
-    scenario = load_scenario(config, [] if every is None
-                             else [f"sim_node.picture.whole_every={every}"])
-    every = scenario.sim["picture.whole_every"]
+def pictures(config, frames, every):
+    """Median milliseconds of ``picture()`` along the path with ``whole_every`` = every."""
+    scenario = load_scenario(config, [f"sim_node.picture.whole_every={every}"])
     sim = Simulator(scenario.sim)
     times = []
     try:
@@ -160,18 +156,19 @@ def main(argv=None):
     env = environment()
     print(f"{name}: {env['machine']}, load average {env['load_average_1min']:.2f}\n")
 
-    parts = picture_parts(args.config, args.frames)
-    windowed = windowed_pictures(args.config, args.frames, args.whole_every)
+    every = args.whole_every or load_scenario(args.config).sim["picture.whole_every"]
+    parts = picture_parts(args.config, args.frames, max(every, 2))
+    whole, windowed = (pictures(args.config, args.frames, k) for k in (1, every))
     print("| part of one picture | median [ms] |")
     print("|---|---:|")
     for part, ms in parts.items():
         print(f"| {part} | {ms:.1f} |" if "pixels" not in part else f"| {part} | {ms:.0f} |")
-    print(f"| picture, whole_every {windowed['whole_every']} ({windowed['windowed']} of "
-          f"{windowed['frames']} from a window) | {windowed['picture_ms']:.1f} |")
+    for case in (whole, windowed):
+        print(f"| picture(), whole_every {case['whole_every']} ({case['windowed']} of "
+              f"{case['frames']} from a window) | {case['picture_ms']:.1f} |")
 
     loops = []
     if args.duration > 0.0:
-        every = windowed["whole_every"]
         cases = [["sim_node.picture.whole_every=1"]]
         if every != 1:
             cases.append([f"sim_node.picture.whole_every={every}"])
@@ -184,7 +181,7 @@ def main(argv=None):
                   f"{loop['sim_s_per_cpu_s']:.2f} | {loop['load_before']:.2f} / "
                   f"{loop['load_after']:.2f} |")
     write_result(args.out or os.path.join(HERE, "results", f"render_{name}.json"),
-                 {"config": name, "picture_parts_ms": parts, "windowed": windowed,
+                 {"config": name, "picture_parts_ms": parts, "pictures": [whole, windowed],
                   "closed_loop": loops, **env})
 
 
