@@ -75,7 +75,7 @@ def test_windowed_pictures_are_the_whole_ones_inside_the_window_and_the_last_who
     where the plate was (the tag is not shown twice) and the arm elsewhere.
     """
     quiet = ("sim_node.picture.read_noise=0.0", "sim_node.picture.shot_noise=0.0")
-    slow = _simulator(*quiet)
+    slow = _simulator(*quiet, "sim_node.picture.whole_every=1")
     fast = _simulator(*quiet, "sim_node.picture.whole_every=4")
     detector = load_scenario(CONFIG).detector.detector()
     try:
@@ -110,7 +110,7 @@ def test_windowed_pictures_are_the_whole_ones_inside_the_window_and_the_last_who
 
 def test_the_detector_finds_the_same_corners_in_windowed_pictures():
     """The file's camera-like pictures (noise on, same seed): corners within 0.05 px."""
-    slow = _simulator()
+    slow = _simulator("sim_node.picture.whole_every=1")
     fast = _simulator("sim_node.picture.whole_every=5")
     scenario = load_scenario(CONFIG)
     detectors = [scenario.detector.detector(), scenario.detector.detector()]
