@@ -20,7 +20,8 @@
     ros2 launch visual_adaptive_servo paper_3dof.launch.py camera_mode:=rendered
 
 Every argument of servo.launch.py (params_file, timing_mode, camera_mode,
-render, record, bag_dir) works here too, with the same defaults.
+render, record, bag_dir, publish_rate, diagnostics_rate) works here too, with
+the same defaults.
 """
 
 import os

@@ -45,7 +45,9 @@ the arm on its brakes while it is not (``hardware.effort_controller``); when
 controller_node exits the effort controller is unspawned (deactivated and unloaded):
 it would otherwise go on sending the stopped node's last command.  ``record:=true``
 records the package's topics and the two hardware topics with ``ros2 bag record -s
-mcap``, as servo.launch.py does.
+mcap``, as servo.launch.py does.  ``publish_rate`` and ``diagnostics_rate`` set
+controller_node's rates of its state topics and /diagnostics (empty: 100 Hz and
+1 Hz; the commands go out at every sample).
 """
 
 import os
@@ -101,6 +103,16 @@ def _unspawn(event, context):
     return [TimerAction(period=UNSPAWN_DELAY, actions=[OpaqueFunction(function=unspawn)])]
 
 
+def _rates(context):
+    """controller_node's ``publish_rate`` and ``diagnostics_rate`` given as launch arguments.
+
+    YAML-parsed (``100`` is a number), checked by the node.
+    """
+    given = {name: LaunchConfiguration(name).perform(context)
+             for name in ("publish_rate", "diagnostics_rate")}
+    return {name: yaml.safe_load(text) for name, text in given.items() if text}
+
+
 def _nodes(context):
     params_file = LaunchConfiguration("params_file").perform(context)
     controllers_file = LaunchConfiguration("controllers_file").perform(context)
@@ -123,7 +135,8 @@ def _nodes(context):
     controller_node = Node(package=PACKAGE, executable="controller_node", name="controller_node",
                            output="screen", parameters=[params_file, {
                                "timing_mode": "realtime", "use_sim_time": True,
-                               "ros2_control.effort_controller": EFFORT_CONTROLLER}])
+                               "ros2_control.effort_controller": EFFORT_CONTROLLER,
+                               **_rates(context)}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
                         "start.wait_for_recorder": record})])
@@ -174,5 +187,11 @@ def generate_launch_description():
                               description="Record the package and hardware topics (MCAP)"),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist)"),
+        DeclareLaunchArgument("publish_rate", default_value="",
+                              description="controller_node's rate [Hz] of its state topics "
+                                          "(empty: 100)"),
+        DeclareLaunchArgument("diagnostics_rate", default_value="",
+                              description="controller_node's rate [Hz] of /diagnostics, plus "
+                                          "one at each change of health level (empty: 1)"),
         OpaqueFunction(function=_nodes),
     ])

@@ -37,6 +37,12 @@ wall time, the messages' header stamps simulated time.  With the rendered
 camera the pictures are recorded too (recording.CAMERA_TOPICS), zstd-compressed
 by the MCAP storage (``--storage-preset-profile zstd_fast``), as ``vas run``
 records them (LZ4 there).
+
+controller_node publishes its commands at every sample and its other topics at
+``publish_rate`` and /diagnostics at ``diagnostics_rate`` (empty: the node's
+defaults, 100 Hz and 1 Hz); with ``record:=true`` in lockstep it publishes
+everything at every sample (``publish_every_sample``), so the bag holds every
+period, as ``vas run``'s recording does.
 """
 
 import os
@@ -71,6 +77,16 @@ def _file_camera_mode(params_file):
     return (section.get("ros__parameters") or {}).get("camera_mode", "points")
 
 
+def _rates(context):
+    """controller_node's ``publish_rate`` and ``diagnostics_rate`` given as launch arguments.
+
+    YAML-parsed (``100`` is a number), checked by the node.
+    """
+    given = {name: LaunchConfiguration(name).perform(context)
+             for name in ("publish_rate", "diagnostics_rate")}
+    return {name: yaml.safe_load(text) for name, text in given.items() if text}
+
+
 def _nodes(context):
     params_file = LaunchConfiguration("params_file").perform(context)
     timing_mode = LaunchConfiguration("timing_mode").perform(context)
@@ -78,6 +94,9 @@ def _nodes(context):
     record = LaunchConfiguration("record").perform(context) == "true"
     camera_mode = (LaunchConfiguration("camera_mode").perform(context)
                    or _file_camera_mode(params_file))
+    controller = {"timing_mode": timing_mode, "use_sim_time": True,
+                  "publish_every_sample": record and timing_mode == "lockstep"}
+    controller.update(_rates(context))
 
     nodes = [
         Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
@@ -86,7 +105,7 @@ def _nodes(context):
                                        "start.wait_for_recorder": record}]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
-             parameters=[params_file, {"timing_mode": timing_mode, "use_sim_time": True}]),
+             parameters=[params_file, controller]),
     ]
     if camera_mode == "rendered":
         nodes.append(Node(package=PACKAGE, executable="feature_detector",
@@ -136,6 +155,13 @@ def generate_launch_description():
         DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
+        DeclareLaunchArgument("publish_rate", default_value="",
+                              description="controller_node's rate [Hz] of its state topics "
+                                          "(empty: 100; every sample with record:=true in "
+                                          "lockstep)"),
+        DeclareLaunchArgument("diagnostics_rate", default_value="",
+                              description="controller_node's rate [Hz] of /diagnostics, plus "
+                                          "one at each change of health level (empty: 1)"),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist); "
                                           "empty: rosbag2_<date> in the current folder"),

@@ -14,5 +14,7 @@
 
 """sim_bridge: the PyBullet arm, pinhole camera and renderer (ROS-free).
 
+Also :mod:`.command_age`: how fresh the commands a realtime loop applies are.
+
 Its ROS 2 node is :mod:`visual_adaptive_servo.ros.sim_node`.
 """

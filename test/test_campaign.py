@@ -187,10 +187,11 @@ def test_shipped_specs_resolve():
                  "real_camera_paper_urdf.yaml"):
         assert len(runs[name]) == 100, name
     compare = runs["compare.yaml"]
-    assert len(compare) == 12 * 2 * 5
+    assert len(compare) == 12 * 3 * 5
     assert {r.controller for r in compare} == set(CONTROLLER_NAMES)
     assert {os.path.basename(r.base) for r in compare} == {"paper_3dof.yaml",
-                                                           "paper_3dof_noisy.yaml"}
+                                                           "paper_3dof_noisy.yaml",
+                                                           "paper_3dof_urdf.yaml"}
 
 
 # -- resolution to overrides ------------------------------------------------------------

@@ -20,9 +20,17 @@ SingleThreadedExecutor.  The oracle for the lockstep loop is the in-process
 runner: both step the same simulator and controller in the same order and
 ``vas run`` reads pixels and times as the messages carry them (float32,
 integer nanoseconds), so the tracking error through ROS must equal the one
-``vas run`` records, sample by sample.
+``vas run`` records, sample by sample (with ``publish_every_sample``, as
+servo.launch.py sets it for a lockstep recording).  Without it the state
+topics must carry exactly the samples of the publish_rate grid (the first
+sample at or after each instant k / rate, computed here from the 5 ms sample
+grid).  The simulator's realtime counts of periods without a new command and
+of the applied command's age are checked against what it really applied: a
+test node commands it with torques that number the commands, and the joint
+states it publishes carry the torque applied over each period.
 """
 
+import math
 import os
 
 import numpy as np
@@ -31,6 +39,7 @@ import pytest
 rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)")
 
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from conftest import bag_messages, spin_until  # noqa: E402
 from visual_adaptive_servo.ros.sim_node import SimNode  # noqa: E402
@@ -71,12 +80,13 @@ def _overrides(specs, params):
     return [Parameter(name, value=to_ros(by_name[name], value)) for name, value in params.items()]
 
 
-def _make_nodes(context, sections):
+def _make_nodes(context, sections, controller_extra=()):
     sim = SimNode(context=context, parameter_overrides=_overrides(SIM_PARAMS,
                                                                   sections[SIM_SECTION]))
     ctl = ControllerNode(context=context, parameter_overrides=_overrides(
         CONTROLLER_PARAMS, sections[CONTROLLER_SECTION]) + [Parameter("use_sim_time",
-                                                                      value=True)])
+                                                                      value=True),
+                                                            *controller_extra])
     return sim, ctl
 
 
@@ -87,14 +97,23 @@ class Probe:
         self.node = rclpy.create_node("probe", context=context)
         msgs = m.rclpy_messages()
         self.errors, self.commands, self.stamped, self.diagnostics = {}, [], [], []
+        self.desired = []
         self.node.create_subscription(msgs.PolygonStamped, "/controller_node/tracking_error",
                                       self._on_error, 100)
+        self.node.create_subscription(
+            msgs.PolygonStamped, "/controller_node/desired",
+            lambda msg: self.desired.append(m.stamp_to_ns(msg.header.stamp)), 100)
         self.node.create_subscription(msgs.Float64MultiArray, "/effort_controller/commands",
                                       lambda msg: self.commands.append(np.array(msg.data)), 100)
         self.node.create_subscription(msgs.JointState, "/controller_node/effort_command",
                                       self.stamped.append, 100)
+        self.stamped_diagnostics = []     # (stamp ns, status)
         self.node.create_subscription(msgs.DiagnosticArray, "/diagnostics",
-                                      lambda msg: self.diagnostics.extend(msg.status), 100)
+                                      self._on_diagnostics, 100)
+
+    def _on_diagnostics(self, msg):
+        self.diagnostics.extend(msg.status)
+        self.stamped_diagnostics += [(m.stamp_to_ns(msg.header.stamp), s) for s in msg.status]
 
     def _on_error(self, msg):
         self.errors[m.stamp_to_ns(msg.header.stamp)] = m.features_from_msg(msg)[1]
@@ -120,7 +139,8 @@ def _reference_errors(tmp_path, changes, duration):
 def test_lockstep_loop_equals_the_in_process_runner(context, tmp_path, camera):
     duration = 2.0
     changes = dict(camera, sim_node__duration=duration)
-    sim, ctl = _make_nodes(context, _sections(**changes))
+    sim, ctl = _make_nodes(context, _sections(**changes),
+                           [Parameter("publish_every_sample", value=True)])
     probe = Probe(context)
     try:
         spin_until(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=120.0)
@@ -252,4 +272,204 @@ def test_realtime_mode_runs_on_the_wall_clock(context):
         assert sim.sim.t == pytest.approx(0.5)
     finally:
         ctl.destroy_node()
+        sim.destroy_node()
+
+
+def _grid_stamps(rate, period_ns, steps):
+    """Stamps [ns] of the samples (every ``period_ns``) a ``rate`` Hz grid lets through."""
+    per_second = round(1e9 / period_ns)
+    indices = sorted({math.ceil(j * per_second / rate - 1e-9)
+                      for j in range(int(steps * rate / per_second) + 2)})
+    return [k * period_ns for k in indices if k < steps]
+
+
+@pytest.mark.parametrize("rate", [None, 30.0, 400])
+def test_state_topics_go_out_at_publish_rate_and_commands_at_every_sample(context, rate):
+    """Lockstep without recording: 100 samples at 200 Hz; the default 100 Hz is every 2nd."""
+    extra = [] if rate is None else [Parameter("publish_rate", value=rate)]
+    sim, ctl = _make_nodes(context, _sections(sim_node__duration=0.5), extra)
+    probe = Probe(context)
+    try:
+        spin_until(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=60.0)
+        assert sim.finished.done()
+        spin_until(context, [probe.node], lambda: False, timeout=0.3)
+        assert ctl.samples == len(probe.commands) == len(probe.stamped) == 100
+        expected = _grid_stamps(100.0 if rate is None else rate, 5_000_000, 100)
+        assert len(expected) == {None: 50, 30.0: 15, 400: 100}[rate]
+        assert sorted(probe.desired) == expected
+        assert sorted(probe.errors) == expected
+    finally:
+        probe.node.destroy_node()
+        ctl.destroy_node()
+        sim.destroy_node()
+
+
+def test_diagnostics_at_their_rate_and_at_once_on_a_change_of_level(context):
+    # a camera 30 ms late: the samples before the first frame are rejected (not OK), the
+    # first one with a frame (at 30 ms, off the 10 Hz grid) is OK and must go out at once
+    changes = {"sim_node__duration": 0.5, "sim_node__camera_rate": 40.0,
+               "sim_node__camera_latency": 0.03}
+    sim, ctl = _make_nodes(context, _sections(**changes),
+                           [Parameter("diagnostics_rate", value=10)])
+    probe = Probe(context)
+    try:
+        spin_until(context, [sim, ctl, probe.node], lambda: sim.finished.done(), timeout=60.0)
+        assert sim.finished.done()
+        spin_until(context, [probe.node], lambda: False, timeout=0.3)
+        published = sorted((stamp, status.level) for stamp, status in probe.stamped_diagnostics
+                           if status.name == "controller_node")
+        stamps = [stamp for stamp, _ in published]
+        assert len(set(stamps)) == len(stamps)
+        grid = [k * 100_000_000 for k in range(5)]
+        assert set(grid) <= set(stamps)
+        first_frame = min(probe.errors)
+        assert first_frame == 30_000_000
+        assert first_frame in stamps
+        levels = dict(published)
+        assert levels[0] != levels[first_frame] and levels[first_frame] in (0, b"\x00")
+        # anything off the grid is a change of level from the status published before it
+        for (_, before), (stamp, level) in zip(published, published[1:]):
+            assert stamp in grid or level != before, stamp
+    finally:
+        probe.node.destroy_node()
+        ctl.destroy_node()
+        sim.destroy_node()
+
+
+@pytest.mark.parametrize("overrides, match", [
+    ({"publish_rate": 0.0}, r"controller_node\.publish_rate: must be a positive finite rate"),
+    ({"publish_rate": -100}, r"controller_node\.publish_rate: must be a positive finite rate"),
+    ({"diagnostics_rate": math.inf},
+     r"controller_node\.diagnostics_rate: must be a positive finite rate"),
+    ({"publish_rate": "fast"}, r"controller_node\.publish_rate: must be a number of Hz"),
+    ({"publish_every_sample": "yes"}, r"controller_node\.publish_every_sample: .*type"),
+])
+def test_invalid_rates_are_refused_at_start_up(context, overrides, match):
+    with pytest.raises(ConfigError, match=match):
+        ControllerNode(context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in overrides.items()])
+
+
+def test_rates_are_read_only(context):
+    ctl = ControllerNode(context=context, parameter_overrides=[Parameter("publish_rate",
+                                                                         value=50)])
+    try:
+        assert ctl.get_parameter("publish_rate").value == 50
+        assert ctl.state_gate.period == pytest.approx(0.02)
+        result = ctl.set_parameters([Parameter("publish_rate", value=10.0)])[0]
+        assert not result.successful and "read-only" in result.reason
+    finally:
+        ctl.destroy_node()
+
+
+class CommandDriver:
+    """A controller that answers every other joint state, with torques that number its commands.
+
+    Command k is [k * 1e-3, 0, 0] N m.  ``hardware``: published as the ros2_control
+    topic hardware does, a JointState on ``topic`` at every state, the latest command
+    again when there is no new one.  Keeps every joint state it receives (stamp,
+    applied torque).
+    """
+
+    def __init__(self, context, joint_names, topic, state_topic, hardware):
+        self.node = rclpy.create_node("driver", context=context)
+        msgs = self.msgs = m.rclpy_messages()
+        self.names, self.hardware = list(joint_names), hardware
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub = self.node.create_publisher(msgs.JointState if hardware
+                                              else msgs.Float64MultiArray, topic, reliable)
+        # best effort like the simulator's states, deep enough to keep every one
+        keep_all = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.node.create_subscription(msgs.JointState, state_topic, self._on_state, keep_all)
+        self.node.create_subscription(msgs.PolygonStamped, "/camera/features",
+                                      lambda msg: None, keep_all)
+        self.states, self.sent, self.tau = [], 0, None
+
+    def _on_state(self, msg):
+        self.states.append((m.stamp_to_ns(msg.header.stamp), tuple(msg.effort)))
+        if len(self.states) % 2 == 0:
+            self.sent += 1
+            self.tau = [self.sent * 1e-3] + [0.0] * (len(self.names) - 1)
+        elif not self.hardware or self.tau is None:
+            return
+        if self.hardware:
+            self.pub.publish(m.effort_command_to_msg(self.msgs, msg.header.stamp, self.names,
+                                                     self.tau))
+        else:
+            self.pub.publish(m.float_array_to_msg(self.msgs, self.tau))
+
+    def applied(self, period_ns):
+        """Per period (the states after the first), the number of the command applied or None."""
+        numbers = {}
+        for k in range(1, self.sent + 1):
+            numbers[(k * 1e-3,) + (0.0,) * (len(self.names) - 1)] = k
+        states = sorted(self.states)
+        assert [stamp for stamp, _ in states] == [j * period_ns for j in range(len(states))], \
+            "a joint state was lost: the oracle needs every period"
+        return [numbers.get(effort) for _, effort in states[1:]]
+
+
+def _oracle(applied):
+    """before_first, with_new, ages [periods] of the applied commands, from what was applied."""
+    before = next(i for i, k in enumerate(applied) if k is not None)
+    first_seen, last, with_new, ages = {}, None, 0, []
+    for i, k in enumerate(applied[before:]):
+        if k is None:
+            continue
+        if k != last:
+            first_seen[k] = i
+            with_new += 1
+            last = k
+        ages.append(i - first_seen[k])
+    return before, with_new, ages
+
+
+@pytest.mark.parametrize("hardware", [False, True], ids=["direct", "ros2_control_hardware"])
+def test_realtime_sim_counts_the_periods_without_a_new_command_it_really_had(context, hardware):
+    changes = {"sim_node__duration": 0.0, "sim_node__timing_mode": "realtime"}
+    topic, state_topic = "/effort_controller/commands", "/joint_states"
+    if hardware:
+        topic, state_topic = "/test_hardware/commands", "/test_hardware/states"
+        changes.update({"sim_node__hardware_DOT_command_topic": topic,
+                        "sim_node__hardware_DOT_state_topic": state_topic})
+    sections = _sections(**changes)
+    sim = SimNode(context=context, parameter_overrides=_overrides(SIM_PARAMS,
+                                                                  sections[SIM_SECTION]))
+    driver = CommandDriver(context, sim.config.joint_names, topic, state_topic, hardware)
+    diagnostics = []
+    msgs = m.rclpy_messages()
+    driver.node.create_subscription(msgs.DiagnosticArray, "/diagnostics",
+                                    lambda msg: diagnostics.extend(msg.status), 100)
+    try:
+        # 1.1 s of realtime at 200 Hz: the diagnostics at 1 s of sim time come too
+        spin_until(context, [sim, driver.node], lambda: len(driver.states) > 220, timeout=30.0)
+        # the simulator stops here; the driver takes the states still on their way
+        spin_until(context, [driver.node], lambda: False, timeout=0.3)
+        age = sim.command_age
+        applied = driver.applied(5_000_000)
+        assert age.periods + age.periods_before_first == len(applied)
+        before, with_new, ages = _oracle(applied)
+        assert (age.periods_before_first, age.with_new) == (before, with_new)
+        assert age.without_new == len(applied) - before - with_new
+        # the controller answers every other state: about half the periods have no new command
+        assert 0.25 < age.without_new / age.periods < 0.75
+        counts = np.bincount(ages)
+        np.testing.assert_array_equal(age.periods_counts[:len(counts)], counts)
+        assert age.periods_counts[len(counts):].sum() == 0
+        assert age.age_periods() == {
+            "median": float(np.percentile(ages, 50, method="inverted_cdf")),
+            "p99": float(np.percentile(ages, 99, method="inverted_cdf")), "max": max(ages)}
+        assert age.summary().startswith(f"{age.without_new} of {age.periods} periods without "
+                                        f"a new command")
+        # the diagnostics say what was true at their stamp
+        status = [s for s in diagnostics if s.name == "sim_node"][-1]
+        values = {kv.key: kv.value for kv in status.values}
+        t_ns = round(float(values["sim_time"]) * 1e9)
+        assert t_ns >= 1_000_000_000
+        before_t, with_new_t, _ = _oracle(applied[:t_ns // 5_000_000])
+        assert int(values["periods_before_first_command"]) == before_t
+        assert int(values["periods_without_new_command"]) == \
+            t_ns // 5_000_000 - before_t - with_new_t
+    finally:
+        driver.node.destroy_node()
         sim.destroy_node()

@@ -75,7 +75,7 @@ class Series:
                   "z_hat": (m,),
                   "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
                   "a_z": (model.p_z,), "a_d": (model.p_d,), "sigma_min_J_star": (),
-                  "damped": ()}
+                  "damped": (), "motion_scale": ()}
         self.data = {k: np.full((steps,) + s, np.nan) for k, s in shapes.items()}
         self.status = []
         self.count = 0
@@ -186,7 +186,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                        z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q, qd=truth.qd,
                        tau=res.tau,
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d,
-                       sigma_min_J_star=res.sigma_min, damped=float(res.damped))
+                       sigma_min_J_star=res.sigma_min, damped=float(res.damped),
+                       motion_scale=res.motion_scale)
             series.status.append(res.status)
             if recorder is not None:
                 recorder.record(meas, res, k % diag_every == 0 or res.status != last_status)
@@ -289,9 +290,11 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
         names = names or [str(i) for i in range(arr.shape[1])]
         columns += [f"{key}.{name}" for name in names]
         blocks.append(arr)
-    # sigma_min of J* and whether its pseudo-inverse was damped (NaN, 0 when not computed)
-    columns += ["sigma_min_J_star", "damped"]
-    blocks += [data["sigma_min_J_star"][:, None], data["damped"][:, None]]
+    # sigma_min of J* and whether its pseudo-inverse was damped (NaN, 0 when not computed),
+    # and the image-motion scale s (docs/robust_adaptation.md; 1 when off)
+    columns += ["sigma_min_J_star", "damped", "motion_scale"]
+    blocks += [data["sigma_min_J_star"][:, None], data["damped"][:, None],
+               data["motion_scale"][:, None]]
     write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"], np.hstack(blocks),
               status)
     if plots and len(data["t"]) > 1:

@@ -16,8 +16,9 @@
 
 The comparison is a campaign (:mod:`.campaign`): ``config/campaigns/compare.yaml``
 names the conditions (cases: noise, camera delay, wrong estimates, slow and late
-cameras) and crosses them with the base configurations (config/paper_3dof.yaml and
-the noise-robust preset) and every controller of
+cameras) and crosses them with the base configurations (config/paper_3dof.yaml, the
+noise-robust preset, and the package's defaults on the same arm: paper_3dof_urdf.yaml)
+and every controller of
 :mod:`visual_adaptive_servo.control.registry` (the paper's and its baselines).
 
 The adaptive controllers all use the base configuration's gains, initial

@@ -85,7 +85,7 @@ CONTROLLER_PARAMS = (
     ParamSpec("gain_design.K_fraction", 0.05, "float",
               "Derived K: the largest scalar with J*^T K J* <= this x the joint damping at the "
               "first sample.", 1e-9, 1.0),
-    ParamSpec("gain_design.kinematic_rate", 0.1, "float",
+    ParamSpec("gain_design.kinematic_rate", 0.03, "float",
               "Derived Gamma_z_perp, Gamma_z: the kinematic estimates converge at this x gamma "
               "(regressor-normalised, docs/gain_design.md).", 0.0, 10.0),
     ParamSpec("gain_design.dynamic_rate", 0.3, "float",
@@ -219,6 +219,19 @@ CONTROLLER_PARAMS = (
     ParamSpec("drift_gain", 0.0, "float",
               "Learn the prediction's drift from each frame's innovation with this gain "
               "(0: off).", 0.0, 1.0),
+    ParamSpec("motion_scale.enabled", True, "bool",
+              "Learn the image-motion scale s from the camera frames and correct eqs (10), (18) "
+              "by it (not in the paper; docs/robust_adaptation.md); false: the paper's law."),
+    ParamSpec("motion_scale.window", 1.0, "float",
+              "Time constant of the frames' weighting in the scale's regression [s].",
+              0.01, 60.0),
+    ParamSpec("motion_scale.rate", 1.0, "float",
+              "How fast s follows the regression [1/s].", 1e-3, 100.0),
+    ParamSpec("motion_scale.lower", 0.2, "float", "Lower bound of s.", 1e-3, 1.0),
+    ParamSpec("motion_scale.upper", 5.0, "float", "Upper bound of s.", 1.0, 1e3),
+    ParamSpec("motion_scale.min_motion", 1.0, "float",
+              "RMS per image coordinate the predicted path must move within the window before "
+              "s is learnt [px].", 0.0, None),
     ParamSpec("safety.hold_time", 0.05, "float",
               "Hold the last valid command this long after input goes bad [s].", 0.0, 10.0,
               True),

@@ -39,6 +39,7 @@ import numpy as np
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
                           sampled_data_margin)
+from .motion_scale import MotionScale
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
@@ -213,7 +214,7 @@ class Projection:
 
 
 def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=None,
-                min_singular_value=0.0, tensors=None, integral=None):
+                min_singular_value=0.0, tensors=None, integral=None, motion_scale=None):
     """Evaluate the paper's controller at one instant.
 
     Parameters
@@ -236,6 +237,11 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         The reference's integral action (docs/robust_adaptation.md, not in the
         paper): x_r_dot = x_d_dot - gamma (x_o - x_d) - kappa e_int with
         e_int_dot = x_o - x_d; None is the paper's eq (18).
+    motion_scale : (s, s_dot) or None
+        The image-motion scale of :mod:`.motion_scale` (docs/robust_adaptation.md, not in
+        the paper) and its rate: the observer's model term of eq (10) is s times the
+        paper's, and eq (18) maps x_r_dot / s (eq (19) its exact derivative); None is
+        the paper's law.
 
     Returns
     -------
@@ -265,6 +271,9 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
     # J_hat(q, x) q_dot = J_perp q_dot - X hat{Z_dot} since J_z_hat q_dot = hat{Z_dot}
     jq = J_perp.dot(qd)
     x_obs_model = (jq - Zh_rate * x_mid) / Zh
+    if motion_scale is not None:
+        scale, scale_dot = motion_scale
+        x_obs_model = scale * x_obs_model
     x_obs_dot = x_obs_model - gains.alpha * dx_obs
     x_r_dot = xd_dot - gains.gamma * e_obs
     x_r_ddot = xd_ddot - gains.gamma * (x_obs_dot - xd_dot)
@@ -291,6 +300,10 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         a_z_dot = a_z_dot - leak.kinematic * (state.a_z - leak.a_z0)
 
     u_dot = 0.5 * (x_obs_dot + xd_dot)
+    if motion_scale is not None:
+        # the joints move 1/s as fast for the same reference: d/dt (x_r_dot / s)
+        x_r_ddot = x_r_ddot / scale - (scale_dot / scale**2) * x_r_dot
+        x_r_dot = x_r_dot / scale
     return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
                            (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
                            (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value,
@@ -432,6 +445,7 @@ class StepResult:
     sigma_min: float = float("nan")
     tau_unsaturated: np.ndarray | None = None
     flags: dict = field(default_factory=dict)
+    motion_scale: float = 1.0   # s of motion_scale.* (1: off, or not learnt yet)
 
 
 @dataclass(frozen=True)
@@ -451,6 +465,7 @@ class StartReport:
     margin: float               # largest eigenvalue of T M_hat^-1 B
     margin_joint: np.ndarray    # T B_jj / M_hat_jj per joint
     joint_names: tuple
+    departures: tuple = ()      # the options on that depart from the paper, as "name value"
 
     def lines(self):
         """The report as text lines."""
@@ -471,7 +486,14 @@ class StartReport:
         per_joint = zip(self.joint_names, self.margin_joint.tolist())
         out.append(f"sampled-data step (T M_hat^-1 B): {self.margin:.3g}; per joint "
                    + ", ".join(f"{name} {rho:.3g}" for name, rho in per_joint))
+        out.append("departures from the paper (docs/robust_adaptation.md): "
+                   + (", ".join(self.departures) if self.departures else "none"))
         return out
+
+
+#: the numeric options that depart from the paper when > 0 (docs/robust_adaptation.md)
+DEPARTURES = ("joint_damping.inertia_rate", "reference.integral_rate",
+              "robust.leakage_kinematic", "robust.leakage_dynamic")
 
 
 class InputError(ValueError):
@@ -533,6 +555,10 @@ class AdaptiveVisualTracker:
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
+        self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
+                                  config["motion_scale.lower"], config["motion_scale.upper"],
+                                  config["motion_scale.min_motion"], config["max_frame_age"])
+                      if config["motion_scale.enabled"] and self.compensate else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
                                       config["projection.a_z_min"], config["projection.a_z_max"],
@@ -563,6 +589,8 @@ class AdaptiveVisualTracker:
                       if all(c[name] is not None for name in DESIGNED) else None)
         self._model_rate = None
         self.predictor.reset()
+        if self.scale is not None:
+            self.scale.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
 
@@ -679,6 +707,8 @@ class AdaptiveVisualTracker:
         """
         tensors = self.model.kinematic_tensors(q, qd)
         if frame is not None:
+            if self.scale is not None:
+                self.scale.frame(stamp, frame)
             x_hat = self.predictor.correct(stamp, frame, t)
         else:
             x_hat = self.predictor.predict(t)
@@ -693,14 +723,24 @@ class AdaptiveVisualTracker:
             result = self._sample(t, q, qd, x_hat, tensors, frame is not None)
             rate = (self._model_rate if result.status == "ok" and self._model_rate is not None
                     else self._prediction_rate(tensors, qd, self.state))
-            self.predictor.commit(t, x_hat, rate, stamp if frame is not None else None)
+            self._commit_prediction(t, x_hat, rate, stamp if frame is not None else None)
             if problems and result.status == "ok":
                 result = replace(result, problems=tuple(problems))
             return result
         # not run: keep the joint buffer continuous for the frames still to come
-        self.predictor.commit(t, x_hat, self._prediction_rate(tensors, qd, self.state),
-                              stamp if frame is not None else None)
+        self._commit_prediction(t, x_hat, self._prediction_rate(tensors, qd, self.state),
+                                stamp if frame is not None else None)
         return self._reject(t, q, qd, problems)
+
+    def _commit_prediction(self, t, x_hat, rate, stamp):
+        """Store the sample in the predictor (its rate scaled by s) and the scale's path."""
+        if self.scale is not None:
+            jq, z_dot, z = rate
+            if x_hat is not None:
+                self.scale.record(t, (jq - x_hat * z_dot) / z)
+            s = self.scale.value
+            rate = (s * jq, s * z_dot, z)
+        self.predictor.commit(t, x_hat, rate, stamp)
 
     @staticmethod
     def _prediction_rate(tensors, qd, state):
@@ -723,6 +763,8 @@ class AdaptiveVisualTracker:
             desired = self.desired
             dt = min(t - self.t_last, self.config["max_dt"])
             state = self.state.advanced(self.rates, dt)
+            if self.scale is not None:
+                self.scale.advance(dt)
             if self._integral:
                 e_int = e_int + dt * (self.state.x_obs - self._xd_last)
         projection = self.projection
@@ -761,7 +803,8 @@ class AdaptiveVisualTracker:
             self._rejecting = ()
         self.last_tau, self.t_last_tau = tau, t
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
-                          saturated, out.projection_active, out.damped, out.sigma_min, out.tau)
+                          saturated, out.projection_active, out.damped, out.sigma_min, out.tau,
+                          motion_scale=1.0 if self.scale is None else self.scale.value)
 
     def _design(self, q):
         """Fix the joint damping and derive the gains left out, at the first valid joint sample.
@@ -861,9 +904,15 @@ class AdaptiveVisualTracker:
                  "Gamma_d": g.Gamma_d, "Gamma_z_perp": g.Gamma_z_perp, "Gamma_z": g.Gamma_z}
         derived = tuple(name for name in gains if name not in explicit
                         and not (name == "Gamma_d" and "Gamma_d_normalized" in explicit))
+        departures = [f"{name} {config[name]:g}" for name in DEPARTURES if config[name] > 0.0]
+        if self.scale is not None:
+            departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
+                              f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
+                              f"{self.scale.upper:g}])")
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
-                             float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names)
+                             float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,
+                             tuple(departures))
         # one record: a node forwards the core's logging throttled per call site
         log.info("start-up report:\n  %s", "\n  ".join(report.lines()))
         return report
@@ -891,9 +940,11 @@ class AdaptiveVisualTracker:
         tensors at (q, q_dot); ``projection`` None when no bound is near.
         """
         kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
+        scale = self.scale
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
                            projection, self.config["min_singular_value"], tensors,
-                           (kappa, e_int) if kappa > 0.0 else None)
+                           (kappa, e_int) if kappa > 0.0 else None,
+                           None if scale is None else (scale.value, scale.derivative))
 
     def _reject(self, t, q, qd, problems):
         # log when the kind of problem changes, not at every sample of a long outage

@@ -19,5 +19,6 @@
 * :mod:`.recorder`: :class:`~.recorder.McapRecorder` (rosbag2-compatible MCAP),
   the recorded topics, CSV and JSON outputs;
 * :mod:`.summary`: the figures of summary.json and of ``vas compare`` (numpy only);
+* :mod:`.cadence`: :class:`~.cadence.RateGate`, which samples' messages a node publishes;
 * :mod:`.plots`: the PNGs of a run (matplotlib, imported only by runs that plot).
 """

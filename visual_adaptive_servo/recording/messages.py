@@ -431,12 +431,24 @@ def controller_outputs(msgs, res, labels, names, stamp=None):
 
     The commands always; x_d and x - x_d only when defined (a rejected sample has
     no tracking error).  ``~/effort_command`` (the command stamped with ``stamp``,
-    the Time of the joint state it answers; default: ``res.t``) comes last: when
-    the simulator has it, everything else of the sample has been sent.
+    the Time of the joint state it answers; default: ``res.t``) comes last.  The
+    order of :func:`controller_output_arrays` and of the recording; the node
+    itself publishes both commands first, then :func:`controller_state_outputs`.
     ``/diagnostics`` is left to the caller's cadence.
     """
+    return [("/effort_controller/commands", float_array_to_msg(msgs, res.tau)),
+            *controller_state_outputs(msgs, res, labels),
+            ("~/effort_command", effort_command_to_msg(
+                msgs, time_to_stamp(msgs, res.t) if stamp is None else stamp, names, res.tau))]
+
+
+def controller_state_outputs(msgs, res, labels):
+    """The controller's state messages of a StepResult: x_d, x_o, x - x_d, z_hat, estimates.
+
+    x_d and x - x_d only when defined (a rejected sample has no tracking error).
+    """
     t = res.t
-    out = [("/effort_controller/commands", float_array_to_msg(msgs, res.tau))]
+    out = []
     if np.all(np.isfinite(res.x_d)):
         out.append(("~/desired", features_to_msg(msgs, t, res.x_d)))
     out.append(("~/observed", features_to_msg(msgs, t, res.x_obs)))
@@ -446,8 +458,6 @@ def controller_outputs(msgs, res, labels, names, stamp=None):
     st = res.state
     out.append(("~/parameters", float_array_to_msg(
         msgs, np.concatenate([st.a_z_perp, st.a_z, st.a_d]), labels)))
-    out.append(("~/effort_command", effort_command_to_msg(
-        msgs, time_to_stamp(msgs, t) if stamp is None else stamp, names, res.tau)))
     return out
 
 

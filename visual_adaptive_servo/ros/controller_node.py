@@ -24,12 +24,13 @@ in:  ``/camera/features`` (geometry_msgs/PolygonStamped, pixels, origin on the o
      axis, stamp = capture time), ``/joint_states`` (sensor_msgs/JointState, joints
      picked by ``joint_names``)
 out: ``/effort_controller/commands`` (std_msgs/Float64MultiArray, one torque per joint in
-     ``joint_names`` order: the ros2_control JointGroupEffortController convention),
+     ``joint_names`` order: the ros2_control JointGroupEffortController convention) and
+     ``~/effort_command`` (sensor_msgs/JointState: the same torques in ``effort``, ``name`` =
+     ``joint_names``, stamped with the joint state it answers: the simulator in lockstep
+     applies a command only to that state), both at every sample; at ``publish_rate``
      ``~/desired``, ``~/observed``, ``~/tracking_error`` (PolygonStamped: x_d, x_o, x - x_d),
-     ``~/estimated_depth``, ``~/parameters`` (Float64MultiArray, labelled), ``/diagnostics``
-     (with the frame ages and counts), and last ``~/effort_command`` (sensor_msgs/JointState:
-     the same torques in ``effort``, ``name`` = ``joint_names``, stamped with the joint state
-     it answers: the simulator in lockstep applies a command only to that state).
+     ``~/estimated_depth``, ``~/parameters`` (Float64MultiArray, labelled); ``/diagnostics``
+     (with the frame ages and counts) at ``diagnostics_rate`` and at once on a change.
 
 One sample per joint state: the tracker runs at every /joint_states message,
 at its stamp, with the newest camera frame received since the last sample that
@@ -63,6 +64,34 @@ joint state arrives for ``JOINT_STATE_WATCHDOG`` seconds of wall time the node
 says so (the hardware or the simulator stopped: with ``use_sim_time`` no sim-time
 timer would fire any more).
 
+Rates (the node's own read-only parameters, not in the scenario file: ``vas run``
+records every sample): at every joint state the two commands go out first, the
+one the consumer takes first (lockstep: ``~/effort_command``, which the simulator
+waits for; realtime: ``/effort_controller/commands``), each built and published
+before anything else of the sample is built.  The state topics follow for the
+samples :class:`~visual_adaptive_servo.recording.cadence.RateGate` lets through at
+``publish_rate`` (default 100 Hz) of the samples' stamps, i.e. of the node's
+clock (sim time under use_sim_time: the simulator stamps the joint state with
+the time it publishes on /clock), so the same samples go out in every run.
+``/diagnostics`` goes out at ``diagnostics_rate`` (default 1 Hz) and at once
+when the health level (OK/WARN/ERROR) changes, so a fault is never delayed.
+With ``publish_every_sample`` (servo.launch.py sets it for ``record:=true`` in
+lockstep) every sample's state topics go out and /diagnostics as ``vas run``
+records them (at ``diagnostics_rate`` and on every change of the sample's
+status), so the bag holds every period and equals ``vas run``'s.
+
+How the callbacks run: one SingleThreadedExecutor (:mod:`.main`), one
+(default, mutually exclusive) callback group, no timer for the rates.  rclpy's
+executors are Python: a MultiThreadedExecutor hands each callback to a thread
+pool under the GIL (no parallel Python, more overhead per callback, and with
+/clock it starved timers in Jazzy, rclpy#1452), and a sim-time timer at
+``publish_rate`` would wake the executor for a wait set of its own.  So the
+state topics are published in the joint-state callback after the commands:
+``Publisher.publish`` converts the message and hands it to the middleware
+before it returns, so the commands are on their way before the first state
+message is built, and the next joint state waits in its queue only for the
+samples that publish (every 10th at 1 kHz).
+
 Runtime parameters (``runtime`` in the schema: gains K and Gamma_*, torque
 limit, damping and safety settings) can be changed with ``ros2 param set``;
 the complete new set is validated by ``ControllerConfig.from_params`` before
@@ -84,12 +113,14 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from ..config.controller import build_controller_model, CONTROLLER_PARAMS, ControllerConfig
 from ..control.controller import AdaptiveVisualTracker, frame_values, health
 from ..recording import messages as m
+from ..recording.cadence import RateGate
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .main import run_node
-from .params import declare_schema, runtime_changes
+from .params import declare_node_parameter, declare_rate, declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing changes
+PUBLISH_RATE = 100.0       # Hz of sim time: default rate of the state topics
+DIAGNOSTICS_RATE = 1.0     # Hz of sim time: default rate of /diagnostics when nothing changes
 MAX_PENDING_FRAMES = 100   # frames kept while waiting for a joint state (more: superseded)
 JOINT_STATE_WATCHDOG = 1.0   # s of wall time without a joint state before the node says so
 # the controller_manager's ~/activity: published on every change, reliable and transient local
@@ -135,7 +166,26 @@ class ControllerNode(Node):
         self.labels = m.parameter_labels(config.model)
         self.msgs = m.rclpy_messages()
 
-        measurement_qos = RELIABLE if config.timing_mode == "lockstep" else qos_profile_sensor_data
+        self.every_sample = declare_node_parameter(
+            self, CONTROLLER_SECTION, "publish_every_sample", False,
+            "Publish the state topics at every sample and /diagnostics as vas run records "
+            "them (servo.launch.py: record:=true in lockstep); false: at publish_rate and "
+            "diagnostics_rate.")
+        publish_rate = declare_rate(
+            self, CONTROLLER_SECTION, "publish_rate", PUBLISH_RATE,
+            "Rate of ~/desired, ~/observed, ~/tracking_error, ~/estimated_depth and "
+            "~/parameters in the node's clock (the commands go out at every sample)")
+        diagnostics_rate = declare_rate(
+            self, CONTROLLER_SECTION, "diagnostics_rate", DIAGNOSTICS_RATE,
+            "Rate of /diagnostics in the node's clock, plus one at every change of the "
+            "health level")
+        self.state_gate = None if self.every_sample else RateGate(
+            publish_rate, f"{CONTROLLER_SECTION}.publish_rate")
+        self.diagnostics_gate = RateGate(diagnostics_rate,
+                                         f"{CONTROLLER_SECTION}.diagnostics_rate")
+
+        lockstep = config.timing_mode == "lockstep"
+        measurement_qos = RELIABLE if lockstep else qos_profile_sensor_data
         msgs = self.msgs
         self.publishers_by_topic = {
             topic: self.create_publisher(getattr(msgs, kind), topic, RELIABLE)
@@ -148,6 +198,9 @@ class ControllerNode(Node):
                                 ("~/effort_command", "JointState"))}
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
                                                      RELIABLE)
+        self.command_pub = self.publishers_by_topic["/effort_controller/commands"]
+        self.stamped_command_pub = self.publishers_by_topic["~/effort_command"]
+        self.lockstep = lockstep
         # frames before joint states: the executor serves ready subscriptions in creation
         # order, so a frame that is waiting is always taken before the joint state
         self.create_subscription(msgs.PolygonStamped, "/camera/features", self._on_features,
@@ -174,8 +227,9 @@ class ControllerNode(Node):
 
         self.pending_frames = []       # (stamp ns, PolygonStamped) not yet passed on
         self.superseded = 0
-        self.last_status = None
-        self.t_last_diagnostics = None
+        self.last_status = None        # status of the previous sample (publish_every_sample)
+        self.health_key = None         # what the health level of the previous sample depends on
+        self.last_level = None         # its level
         self.samples = 0
         self.reported = None           # the tracker's start-up report, once logged
         self.log_handler = RosLogHandler(self.get_logger())
@@ -183,6 +237,11 @@ class ControllerNode(Node):
         self.get_logger().info(f"model {params['model']} (kinematic tensors: "
                                f"{getattr(config.model, 'backend', 'numpy')} backend), joints "
                                f"{self.joint_names}, timing_mode {config.timing_mode}")
+        self.get_logger().info(
+            "commands at every sample; state topics and /diagnostics "
+            + ("at every sample and as vas run records them (publish_every_sample)"
+               if self.every_sample else f"at {publish_rate:g} Hz and {diagnostics_rate:g} Hz "
+                                         f"(and on a change of health level)"))
         if self.effort_controller:
             self.get_logger().info(f"tracking while {self.effort_controller} is active "
                                    f"({manager}/activity)")
@@ -260,17 +319,41 @@ class ControllerNode(Node):
 
     # -- one sample's outputs ----------------------------------------------------
     def _publish(self, res, stamp):
-        msgs, t = self.msgs, res.t
-        if (res.status != self.last_status or self.t_last_diagnostics is None
-                or t - self.t_last_diagnostics >= DIAGNOSTICS_PERIOD - 1e-9):
-            level, message, values = health(res)
-            values.update(frame_values(self.tracker.frames, self.superseded))
-            self.diagnostics_pub.publish(m.diagnostics_to_msg(
-                msgs, t, "controller_node", level, message, values, "controller"))
-            self.t_last_diagnostics = t
-        self.last_status = res.status
-        for topic, msg in m.controller_outputs(msgs, res, self.labels, self.joint_names, stamp):
-            self.publishers_by_topic[topic].publish(msg)
+        msgs = self.msgs
+        # the command its consumer takes first: the simulator in lockstep waits for the stamped
+        # one, the effort controller (or the simulator in realtime) takes the other
+        if self.lockstep:
+            self.stamped_command_pub.publish(m.effort_command_to_msg(msgs, stamp,
+                                                                     self.joint_names, res.tau))
+            self.command_pub.publish(m.float_array_to_msg(msgs, res.tau))
+        else:
+            self.command_pub.publish(m.float_array_to_msg(msgs, res.tau))
+            self.stamped_command_pub.publish(m.effort_command_to_msg(msgs, stamp,
+                                                                     self.joint_names, res.tau))
+        if self.state_gate is None or self.state_gate.due(res.t):
+            for topic, msg in m.controller_state_outputs(msgs, res, self.labels):
+                self.publishers_by_topic[topic].publish(msg)
+        self._publish_diagnostics(res)
+
+    def _publish_diagnostics(self, res):
+        due = self.diagnostics_gate.due(res.t)
+        if self.every_sample:
+            changed = res.status != self.last_status      # as vas run records them
+            self.last_status = res.status
+        else:
+            changed = False
+            # health() formats its values: only computed when its level may have changed
+            key = (res.status, res.saturated, res.projection_active, res.damped)
+            if key != self.health_key:
+                self.health_key = key
+                level = health(res)[0]
+                changed, self.last_level = level != self.last_level, level
+        if not (due or changed):
+            return
+        level, message, values = health(res)
+        values.update(frame_values(self.tracker.frames, self.superseded))
+        self.diagnostics_pub.publish(m.diagnostics_to_msg(
+            self.msgs, res.t, "controller_node", level, message, values, "controller"))
 
     # -- parameters --------------------------------------------------------------
     def _on_set_parameters(self, parameters):

@@ -36,6 +36,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.exceptions import ParameterException
 
+from ..recording.cadence import checked_rate
 from ..schema import ConfigError
 
 PARAMETER_TYPES = {
@@ -152,3 +153,27 @@ def declare_schema(node, specs, section, build_structure=None, given=None):
         if given is not None and values[spec.name] != from_ros(spec, to_ros(spec, default)):
             given.add(spec.name)
     return values
+
+
+def declare_node_parameter(node, section, name, default, description, dynamic_typing=False):
+    """Declare a read-only parameter outside the schema; return its value.
+
+    A value of the wrong type raises ConfigError naming ``section.name``.
+    """
+    desc = ParameterDescriptor(name=name, description=description, read_only=True,
+                               dynamic_typing=dynamic_typing)
+    try:
+        return node.declare_parameter(name, default, desc).value
+    except ParameterException as exc:
+        raise ConfigError(f"{section}.{name}: {exc}") from None
+
+
+def declare_rate(node, section, name, default, description):
+    """Declare a read-only rate [Hz] (an integer is taken too); return it as a float.
+
+    Raises ConfigError naming ``section.name`` unless it is a positive finite number.
+    """
+    value = declare_node_parameter(node, section, name, float(default),
+                                   f"{description} [Hz], positive and finite.",
+                                   dynamic_typing=True)
+    return checked_rate(f"{section}.{name}", value)

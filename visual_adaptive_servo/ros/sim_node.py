@@ -92,7 +92,18 @@ controller first: deterministic up to the detector timeout.
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
 ``command_timeout``; as a ros2_control hardware the latest command from
-``hardware.command_topic``, the brakes without one).
+``hardware.command_topic``, the brakes without one).  A late controller does
+not stop this loop, it only makes it apply the previous command again, so
+:class:`sim_bridge.command_age.CommandAge` counts the periods without a new
+command (since the first command; those before it apart) and the age of the
+command applied, in periods and in ms of wall time from its arrival (median,
+p99, max); /diagnostics carries them (``periods_without_new_command``,
+``command_age_periods_*``, ``command_age_ms_*``, ...) and the line at the end
+states them.  A new command is a message received since the previous period;
+as a ros2_control hardware, which resends the effort controller's latest
+command at every cycle, a command whose torques differ from the previous one
+(so a new command bit-identical to the one before, a torque held at its
+limit, is not seen as new there).
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
 is reliable (depth 10); in realtime the measurements (/joint_states, the
@@ -116,6 +127,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from rclpy.task import Future
 
 from sim_bridge import render
+from sim_bridge.command_age import CommandAge
 from sim_bridge.simulator import Simulator
 
 from ..config.sim import build_sim_arm, SIM_PARAMS, SimConfig
@@ -227,6 +239,7 @@ class SimNode(Node):
         self.step_ns = None             # stamp of the joint state waiting for its command
         self.awaiting_detection = None  # stamp of the picture waiting for its features
         self.command, self.command_wall = None, None
+        self.command_age = None if self.lockstep else CommandAge()
         self.braking, self.brake_reason = False, ""
         self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
                          "stale_commands": 0, "frame_delivery_timeouts": 0,
@@ -319,6 +332,7 @@ class SimNode(Node):
 
     def _on_command(self, msg):
         self.command, self.command_wall = m.float_array_from_msg(msg)[0], time.monotonic()
+        self.command_age.received(self.command_wall)
 
     def _on_hardware_command(self, msg):
         try:
@@ -329,7 +343,11 @@ class SimNode(Node):
             self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
             return
         if np.all(np.isfinite(tau)):
+            # the hardware resends the controller's latest command at every cycle
+            new = self.command is None or not np.array_equal(tau, self.command)
             self.command, self.command_wall = tau, time.monotonic()
+            if new:
+                self.command_age.received(self.command_wall)
 
     def _on_activity(self, msg):
         states = {c.name: c.state.label for c in msg.controllers}
@@ -358,11 +376,14 @@ class SimNode(Node):
             self.publishers_by_topic["/clock"].publish(self.pending_clock)
             self.pending_clock = None
             return
+        now = time.monotonic()
         fresh = (self.command_wall is not None
-                 and time.monotonic() - self.command_wall <= self.config.command_timeout)
+                 and now - self.command_wall <= self.config.command_timeout)
         if self.hardware_topic:
+            self.command_age.period(now, fresh and self.effort_state == "active")
             self._hardware_tick(fresh)
             return
+        self.command_age.period(now, fresh)
         if not fresh and self.command_wall is not None:
             self.counters["command_timeouts"] += 1
             self.problem = (f"command older than {self.config.command_timeout} s at "
@@ -432,7 +453,8 @@ class SimNode(Node):
             f"{c['refused_commands']} refused commands, {c['stale_commands']} stale commands, "
             f"{c['frame_delivery_timeouts']} frame delivery timeouts, "
             f"{c['detector_timeouts']} detector timeouts, "
-            f"{c['held_periods']} periods held on the brakes")
+            f"{c['held_periods']} periods held on the brakes"
+            + ("" if self.command_age is None else "; " + self.command_age.summary()))
         self.finished.set_result(True)
 
     # -- outputs -----------------------------------------------------------------
@@ -505,6 +527,8 @@ class SimNode(Node):
         wall = time.monotonic() - self.wall_start
         values = dict(self.counters, timing_mode=self.config.timing_mode, sim_time=f"{t:.3f}",
                       realtime_factor=f"{t / wall:.3g}" if wall > 0 else "inf")
+        if self.command_age is not None:
+            values.update(self.command_age.values())
         self.diagnostics_pub.publish(m.diagnostics_to_msg(
             self.msgs, t, "sim_node", level, self.problem or "running", values, "sim"))
         self.last_level, self.t_last_diagnostics, self.problem = level, t, ""

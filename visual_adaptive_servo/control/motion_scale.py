@@ -1,0 +1,139 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The image-motion scale: how much faster the features move than the estimated model says.
+
+The initial kinematic estimates of an uncalibrated camera are off by a factor
+of 2 or more in focal length and depth; the paper's adaptation (eqs (24), (25))
+corrects them, but slowly, and meanwhile every image velocity the controller
+maps to joint velocities is off by that factor: the reference velocity of
+eq (18) is too fast or too slow by the ratio of the true to the estimated image
+Jacobian, so is the loop gain, and a slow camera's loop has little margin for
+that (docs/robust_adaptation.md).
+
+:class:`MotionScale` estimates one positive scalar s from the camera frames:
+the regression of each frame's pixels on the image path the estimated model
+predicts from the joints alone,
+
+    P(t) = integral of Z_hat^-1 J_hat(q, x_hat) q_dot dt   (the unscaled model rate),
+    x_c - mean(x_c) = s (P(t_c) - mean(P(t_c)))            (per image coordinate),
+
+over an exponentially weighted window of frames (``window`` seconds): pixel
+noise is averaged over every frame in the window, and the per-coordinate means
+absorb where the points are, so s does not depend on the pixel origin.  The
+regression is only trusted once the predicted path moved ``min_motion`` px
+(RMS per coordinate) within the window.  s follows the regression smoothly,
+``d ln s / dt = rate (ln s_target - ln s)``, bounded to ``[lower, upper]``,
+so its time derivative is known and eq (19) stays the exact derivative of
+eq (18) (:func:`~.controller.control_law`, argument ``motion_scale``).
+"""
+
+from __future__ import annotations
+
+import bisect
+from math import exp, log
+
+import numpy as np
+
+
+class MotionScale:
+    """The scale s of the estimated image motion, learnt from camera frames.
+
+    Parameters
+    ----------
+    window : float
+        Time constant of the frames' exponential weighting [s].
+    rate : float
+        How fast s follows the regression [1/s].
+    lower, upper : float
+        Bounds of s (and of the regression's value).
+    min_motion : float
+        RMS per image coordinate the predicted path must have moved within the
+        window before the regression is trusted [px].
+    horizon : float
+        How far back a frame may be captured (the path buffer keeps this much) [s].
+    """
+
+    def __init__(self, window, rate, lower, upper, min_motion, horizon):
+        self.window = float(window)
+        self.rate = float(rate)
+        self.lower, self.upper = float(lower), float(upper)
+        self.min_motion = float(min_motion)
+        self.horizon = float(horizon)
+        self.reset()
+
+    def reset(self):
+        self.value = 1.0            # s
+        self.target = 1.0           # the regression's value, once trusted
+        self.times = []             # joint-sample times of the path
+        self.path = []              # P at those times, (2m,) each
+        self.speed = []             # the unscaled model rate there, (2m,) each
+        self.sums = None            # weighted sums (w, x, P, xP, PP) of the regression
+        self.t_frame = None         # capture time of the last frame in the sums
+
+    @property
+    def derivative(self):
+        """ds/dt at the current value."""
+        return self.rate * self.value * (log(self.target) - log(self.value))
+
+    def advance(self, dt):
+        """Move s toward the regression's value over dt (exact for the log-linear law)."""
+        if self.target != self.value:
+            ln_s = log(self.target) + (log(self.value) - log(self.target)) * exp(-self.rate * dt)
+            self.value = exp(ln_s)
+
+    def record(self, t, speed):
+        """Extend the predicted path to joint time t; ``speed`` is the unscaled model rate at t."""
+        speed = np.asarray(speed, dtype=float)
+        if self.times:
+            p = self.path[-1] + (t - self.times[-1]) * self.speed[-1]
+        else:
+            p = np.zeros_like(speed)
+        self.times.append(t)
+        self.path.append(p)
+        self.speed.append(speed)
+        if t - self.times[0] > 1.5 * self.horizon:
+            first = max(bisect.bisect_left(self.times, t - self.horizon) - 1, 0)
+            del self.times[:first], self.path[:first], self.speed[:first]
+
+    def path_at(self, stamp):
+        """P at ``stamp`` (None before the first joint sample at or before it)."""
+        i = bisect.bisect_right(self.times, stamp + 1e-9) - 1
+        if i < 0:
+            return None
+        return self.path[i] + (stamp - self.times[i]) * self.speed[i]
+
+    def frame(self, stamp, x):
+        """Add the frame captured at ``stamp`` to the regression; the new target or None."""
+        p = self.path_at(stamp)
+        if p is None or (self.t_frame is not None and stamp <= self.t_frame):
+            return None
+        x = np.asarray(x, dtype=float)
+        if self.sums is None:
+            self.sums = [0.0, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
+                         np.zeros_like(x)]
+        else:
+            decay = exp(-(stamp - self.t_frame) / self.window)
+            self.sums = [decay * v for v in self.sums]
+        self.t_frame = stamp
+        w, sx, sp, sxp, spp = self.sums
+        self.sums = [w + 1.0, sx + x, sp + p, sxp + x * p, spp + p * p]
+        w, sx, sp, sxp, spp = self.sums
+        var_p = spp / w - (sp / w) ** 2
+        if not float(np.mean(var_p)) > max(self.min_motion ** 2, 1e-12):
+            return None
+        cov = float(np.sum(sxp / w - sx * sp / w**2))
+        s = cov / float(np.sum(var_p))
+        self.target = min(max(s, self.lower), self.upper)
+        return self.target
