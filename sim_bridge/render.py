@@ -44,19 +44,24 @@ RENDER_PIXEL_SHIFT = (0.5, -0.5)
 FLAT_LIGHT = {"lightAmbientCoeff": 1.0, "lightDiffuseCoeff": 0.0, "lightSpecularCoeff": 0.0}
 
 
-def view_matrices(camera, near=NEAR, far=FAR):
-    """PyBullet (view, projection) matrices of a :class:`~.camera.PinholeCamera`."""
+def view_matrices(camera, near=NEAR, far=FAR, window=None):
+    """PyBullet (view, projection) matrices of a :class:`~.camera.PinholeCamera`.
+
+    ``window`` (c0, r0, c1, r1), whole raw pixels: the frustum of columns c0 to c1 and
+    rows r0 to r1 of the camera's picture only; rendered at (c1 - c0) x (r1 - r0), pixel
+    (i, j) of it is pixel (r0 + i, c0 + j) of the whole picture (:func:`tag_window`).
+    """
     rotation = np.asarray(camera.rotation, dtype=float)
     eye = np.asarray(camera.position, dtype=float)
     view = pybullet.computeViewMatrix(eye.tolist(), (eye + rotation[2]).tolist(),
                                       (-rotation[1]).tolist())
     # frustum at the near plane: raw column c is X_C/Z_C = (c - cx)/fx, row r is
     # Y_C/Z_C = (r - cy)/fy with Y_C pointing down the picture
-    W, H = camera.width, camera.height
+    c0, r0, c1, r1 = window or (0, 0, camera.width, camera.height)
     du, dv = RENDER_PIXEL_SHIFT
     projection = pybullet.computeProjectionMatrix(
-        (du - camera.cx) / camera.fx * near, (W + du - camera.cx) / camera.fx * near,
-        -(H + dv - camera.cy) / camera.fy * near, (camera.cy - dv) / camera.fy * near,
+        (c0 + du - camera.cx) / camera.fx * near, (c1 + du - camera.cx) / camera.fx * near,
+        -(r1 + dv - camera.cy) / camera.fy * near, (camera.cy - r0 - dv) / camera.fy * near,
         near, far)
     return view, projection
 
@@ -113,6 +118,39 @@ def render_camera_view(client, camera, width, height, markers=()):
     return rgb
 
 
+# the tag window (PictureSettings.whole_every): the bounding box of the tag plate's corners
+# widened by this part of its size each side, MIN_WINDOW_MARGIN px at least (what the
+# AprilTag quad search looks at around the tag: its 4 px threshold tiles and their
+# neighbours, 12 px); wider than MAX_WINDOW_FRACTION of the picture, the whole picture
+WINDOW_MARGIN = 0.15
+MIN_WINDOW_MARGIN = 16
+MAX_WINDOW_FRACTION = 0.5
+# m added to each side of a link's (collision) bounding box before it is tested against the
+# window: its visual mesh may reach a little beyond it
+CULL_MARGIN = 0.05
+
+
+def tag_window(points, width, height, margin=WINDOW_MARGIN, min_margin=MIN_WINDOW_MARGIN):
+    """The window (c0, r0, c1, r1) of whole raw pixels around raw image points (k, 2).
+
+    Their bounding box widened by ``margin`` x its larger side (at least ``min_margin``
+    px) each side, clipped to the width x height picture; None when a point is not
+    finite, the window is empty (the points are off the picture) or it covers more than
+    ``MAX_WINDOW_FRACTION`` of the picture (then the whole picture costs about as much).
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(points)):
+        return None
+    low, high = points.min(axis=0), points.max(axis=0)
+    pad = max(margin * float(np.max(high - low)), float(min_margin))
+    c0, r0 = (int(max(np.floor(v - pad), 0)) for v in low)
+    c1 = int(min(np.ceil(high[0] + pad), width))
+    r1 = int(min(np.ceil(high[1] + pad), height))
+    if c1 <= c0 or r1 <= r0 or (c1 - c0) * (r1 - r0) > MAX_WINDOW_FRACTION * width * height:
+        return None
+    return c0, r0, c1, r1
+
+
 @dataclass(frozen=True)
 class PictureSettings:
     """How camera-like the rendered pictures are (``sim_node.picture.*``).
@@ -126,6 +164,14 @@ class PictureSettings:
     sqrt(read^2 + shot^2 I) on the intensity I in [0, 1]; ``gamma``: the picture is
     I^(1/gamma) (1: linear), applied after the noise, as in a camera.  Each step on the
     8-bit picture the renderer gives (so the picture's darkest levels are coarse).
+
+    ``whole_every`` (with a tag): the whole picture is rendered at every
+    ``whole_every``-th frame only (1: at every frame); at the frames between, only the
+    tag window (:func:`tag_window` of the plate's corners), pasted before the noise into
+    the last whole picture rendered without the plate.  Inside the window the picture
+    is the whole rendering's; outside it the arm and any occluder are as at the last
+    whole picture (the surroundings do not move, the noise is new), and no old copy of
+    the tag is left.
     """
 
     surroundings: bool = False
@@ -135,6 +181,7 @@ class PictureSettings:
     read_noise: float = 0.0
     shot_noise: float = 0.0
     gamma: float = 1.0
+    whole_every: int = 1
 
     @property
     def blurred(self):
@@ -151,9 +198,17 @@ class PictureMaker:
     That costs about what the arm alone costs: with the floor and the boxes in the
     same client the TinyRenderer takes 4 to 5 times as long (their textured pixels
     cover most of the picture).
+
+    ``tag_body`` and ``tag_outline``: the plate's body in ``client`` and a callable
+    giving the raw image points (k, 2) of its corners now (None when it cannot: then
+    the whole picture); without them every picture is rendered whole.  A window costs
+    the TinyRenderer its pixels and every triangle of the visible bodies: the links of
+    ``window_bodies`` whose bounding boxes (plus ``CULL_MARGIN``) project outside the
+    window are left out of its rendering (``benchmarks/bench_render.py``: the parts).
     """
 
-    def __init__(self, client, camera, settings, seed=0):
+    def __init__(self, client, camera, settings, seed=0, tag_body=None, tag_outline=None,
+                 window_bodies=()):
         self.client, self.camera, self.settings = client, camera, settings
         self.rng = np.random.default_rng(seed)
         self.light = {}
@@ -164,6 +219,28 @@ class PictureMaker:
         self.background = None
         if settings.surroundings:
             self.background = self._render_surroundings(seed)
+        windows = settings.whole_every > 1 and tag_outline is not None
+        self.tag_body = tag_body if windows else None
+        self.tag_outline = tag_outline if windows else None
+        self.frames = 0           # pictures made
+        self.windows = 0          # of them, made from a tag window
+        self._base = None         # the last whole picture without the plate, before the noise
+        # (body, link, rgba) of each link with one visual shape: hidden by alpha 0 (the
+        # TinyRenderer skips such shapes), then given its colour back
+        self._links = []
+        for body in window_bodies if windows else ():
+            shapes = pybullet.getVisualShapeData(body, physicsClientId=client)
+            links = [shape[1] for shape in shapes]
+            self._links += [(body, shape[1], shape[7]) for shape in shapes
+                            if links.count(shape[1]) == 1]
+        self._windowed = False    # whether the last _composite rendered a window
+        self.last_window = None   # (c0, r0, c1, r1) the last rendering's window, None: whole
+        self._noise_std = None
+        if settings.read_noise > 0.0 or settings.shot_noise > 0.0:
+            levels = np.arange(256, dtype=np.float32) / np.float32(255.0)
+            self._noise_std = (255.0 * np.sqrt(settings.read_noise ** 2
+                                               + settings.shot_noise ** 2 * levels)
+                               ).astype(np.float32)
         self.samples = []
 
     def _render_surroundings(self, seed):
@@ -176,32 +253,101 @@ class PictureMaker:
         finally:
             pybullet.disconnect(other)
 
-    def _render(self, client):
-        """(rgb (h, w, 3) uint8, depth buffer (h, w) float32) of a client's bodies."""
-        W, H = self.camera.width, self.camera.height
-        view, projection = view_matrices(self.camera)
+    def _render(self, client, window=None):
+        """(rgb (h, w, 3) uint8, depth buffer (h, w) float32) of a client's bodies.
+
+        ``window`` (c0, r0, c1, r1): that part of the picture only (:func:`view_matrices`).
+        """
+        import cv2
+
+        c0, r0, c1, r1 = window or (0, 0, self.camera.width, self.camera.height)
+        W, H = c1 - c0, r1 - r0
+        view, projection = view_matrices(self.camera, window=window)
         _, _, rgba, depth, _ = pybullet.getCameraImage(
             W, H, viewMatrix=view, projectionMatrix=projection,
             renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
             physicsClientId=client, **(self.light or FLAT_LIGHT))
-        rgb = np.asarray(rgba, dtype=np.uint8).reshape(H, W, 4)[:, :, :3]
+        rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(H, W, 4), cv2.COLOR_RGBA2RGB)
         return rgb, np.asarray(depth, dtype=np.float32).reshape(H, W)
 
     def exposure_sample(self):
         """Render one picture of the exposure now (motion blur: :meth:`picture` averages)."""
         self.samples.append(self._composite())
 
+    def _window(self):
+        """The tag window to render now, None for the whole picture."""
+        if (self.tag_outline is None or self._base is None
+                or self.frames % self.settings.whole_every == 0):
+            return None
+        outline = self.tag_outline()
+        if outline is None:
+            return None
+        return tag_window(outline, self.camera.width, self.camera.height)
+
     def _composite(self):
+        """The scene now, before the noise: (h, w, 3) uint8 (the tag window when one is due)."""
+        window = self._window()
+        self._windowed, self.last_window = window is not None, window
+        part = self._scene(window)
+        if window is None:
+            return part
+        c0, r0, c1, r1 = window
+        picture = self._base.copy()
+        picture[r0:r1, c0:c1] = part
+        return picture
+
+    def _scene(self, window=None):
+        """The client's bodies over the surroundings, by depth, in ``window`` (None: whole)."""
         import cv2
 
-        rgb, depth = self._render(self.client)
+        hidden = self._outside(window) if window is not None else []
+        try:
+            for body, link, _ in hidden:
+                pybullet.changeVisualShape(body, link, rgbaColor=(0, 0, 0, 0),
+                                           physicsClientId=self.client)
+            rgb, depth = self._render(self.client, window)
+        finally:
+            for body, link, rgba in hidden:
+                pybullet.changeVisualShape(body, link, rgbaColor=rgba,
+                                           physicsClientId=self.client)
         if self.background is None:
             return rgb
         bg_rgb, bg_depth = self.background
+        if window is not None:
+            c0, r0, c1, r1 = window
+            bg_rgb, bg_depth = bg_rgb[r0:r1, c0:c1], bg_depth[r0:r1, c0:c1]
         picture = bg_rgb.copy()
         # cv2.copyTo: 1-2 ms against 5-20 ms for np.where over the 640 x 480 x 3 picture
         cv2.copyTo(rgb, (depth < bg_depth).view(np.uint8), picture)
         return picture
+
+    def _outside(self, window):
+        """The links whose bounding boxes cannot reach ``window`` (all corners in front)."""
+        c0, r0, c1, r1 = window
+        corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        outside = []
+        for body, link, rgba in self._links:
+            low, high = (np.asarray(v) for v in pybullet.getAABB(body, link,
+                                                                 physicsClientId=self.client))
+            box = np.where(corners, high + CULL_MARGIN, low - CULL_MARGIN)
+            pixels, depth = self.camera.project(box)
+            if min(depth.tolist()) <= NEAR:
+                continue
+            raw = self.camera.to_raw(pixels)
+            (u0, v0), (u1, v1) = raw.min(axis=0), raw.max(axis=0)
+            if u1 < c0 - 1 or u0 > c1 + 1 or v1 < r0 - 1 or v0 > r1 + 1:
+                outside.append((body, link, rgba))
+        return outside
+
+    def _render_base(self):
+        """The whole picture now without the tag plate (what a window is pasted into)."""
+        pybullet.changeVisualShape(self.tag_body, -1, rgbaColor=(1, 1, 1, 0),
+                                   physicsClientId=self.client)
+        try:
+            self._base = self._scene()
+        finally:
+            pybullet.changeVisualShape(self.tag_body, -1, rgbaColor=(1, 1, 1, 1),
+                                       physicsClientId=self.client)
 
     def picture(self):
         """The picture captured now: (h, w, 3) uint8 RGB."""
@@ -210,21 +356,27 @@ class PictureMaker:
         s = self.settings
         frames = self.samples + [self._composite()]
         self.samples = []
+        if self.tag_outline is not None and not self._windowed:
+            self._render_base()
+        self.frames += 1
+        self.windows += self._windowed
         if len(frames) == 1:
-            picture = np.ascontiguousarray(frames[0])
+            picture = frames[0]
         else:
             picture = np.rint(np.mean(np.stack(frames), axis=0)).astype(np.uint8)
-        if s.read_noise > 0.0 or s.shot_noise > 0.0:
+        if self._noise_std is not None:
             # noise of each 8-bit level's intensity I: std sqrt(read^2 + shot^2 I), through a
             # look-up table, and the normal samples by cv2.randn (a third of numpy's time)
-            levels = np.arange(256, dtype=np.float32) / np.float32(255.0)
-            std = 255.0 * np.sqrt(s.read_noise ** 2 + s.shot_noise ** 2 * levels)
             noise = np.empty(picture.shape, np.float32)
             cv2.setRNGSeed(int(self.rng.integers(2**31)))
             # one channel: on an (h, w, 3) array cv2.randn would fill the first channel only
             cv2.randn(noise.reshape(noise.shape[0], -1), 0.0, 1.0)
-            noisy = picture.astype(np.float32) + noise * cv2.LUT(picture, std.astype(np.float32))
-            picture = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+            # picture + noise x std(picture) in float32, rounded to nearest (ties to even) and
+            # saturated to 0-255 by OpenCV: the numbers of np.clip(np.rint(...)) without its
+            # temporary arrays (the sum of uint8 and float32 would be made in double, and
+            # differ in 1 of 1500 values)
+            noise = cv2.multiply(noise, cv2.LUT(picture, self._noise_std))
+            picture = cv2.add(picture.astype(np.float32), noise, dtype=cv2.CV_8U)
         if s.gamma != 1.0:
             picture = cv2.LUT(picture, self._gamma_table)
         return picture

@@ -131,9 +131,11 @@ class Simulator:
                 config["picture.surroundings"], config["picture.shading"],
                 config["picture.exposure"], config["picture.exposure_samples"],
                 config["picture.read_noise"], config["picture.shot_noise"],
-                config["picture.gamma"])
-            self.pictures = render.PictureMaker(self.plant.client, self.camera, settings,
-                                                config.seed)
+                config["picture.gamma"], config["picture.whole_every"])
+            self.pictures = render.PictureMaker(
+                self.plant.client, self.camera, settings, config.seed,
+                *((None, None) if self.tag is None else (self.tag.body, self._plate_outline)),
+                window_bodies=(self.plant.body,))
             self._exposure_times = []
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
                                             config.camera_rate, config.camera_latency, config.seed)
@@ -254,6 +256,14 @@ class Simulator:
             self.tag.place(*self.plant.tip_pose())
         else:
             self.plant.place_markers()
+
+    def _plate_outline(self):
+        """Raw image points (4, 2) of the tag plate's corners now (None if one is behind)."""
+        R, p = self.plant.tip_pose()
+        pixels, depth = self.camera.project(p + self.config.tag.plate_corners() @ R.T)
+        if min(depth.tolist()) <= render.NEAR:
+            return None
+        return self.camera.to_raw(pixels)
 
     def _render(self):
         """The camera's picture now, markers placed (render.PictureMaker: how it looks)."""

@@ -462,3 +462,16 @@ def test_vas_campaign_refuses_a_bad_spec_with_its_message(tmp_path, capsys):
     path = write_spec(str(tmp_path), "base: paper_3dof.yaml\nduration: 0\ngrid: {seed: [1]}\n")
     assert main(["campaign", "--spec", path, "--out", str(tmp_path / "out")]) == 2
     assert "duration: must be simulated seconds > 0" in capsys.readouterr().err
+
+
+def test_a_case_may_give_its_own_duration(tmp_path):
+    spec = tmp_path / "s.yaml"
+    spec.write_text("base: paper_3dof.yaml\nduration: 10.0\ncases:\n"
+                    "  - {name: short}\n  - {name: long, duration: 20.0}\n")
+    runs = load_spec(str(spec)).runs()
+    assert [r.duration for r in runs] == [10.0, 20.0]
+    assert "--duration 20.0" in runs[1].command
+    spec.write_text("base: paper_3dof.yaml\nduration: 10.0\n"
+                    "cases:\n  - {name: bad, duration: 0}\n")
+    with pytest.raises(SpecError, match="duration"):
+        load_spec(str(spec))

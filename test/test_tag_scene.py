@@ -88,6 +88,7 @@ def test_the_controllers_feature_points_must_be_the_tags():
     ("sim_node.markers.tag.points=[center]", "markers.tag.points: needs one name per"),
     ("sim_node.markers.tag.family=36h12", "tag family"),
     ("feature_detector.type=blobs", "feature_detector.type: must be one of"),
+    ("sim_node.picture.whole_every=0", "picture.whole_every"),
 ])
 def test_bad_marker_settings_are_refused_naming_the_parameter(override, message):
     with pytest.raises(ConfigError, match=message):
@@ -104,9 +105,7 @@ class _Flat:
     """A PictureMaker whose scene is one grey level (the noise statistics' oracle)."""
 
     def __init__(self, level, settings, seed=0):
-        self.maker = render.PictureMaker.__new__(render.PictureMaker)
-        self.maker.settings, self.maker.samples = settings, []
-        self.maker.rng = np.random.default_rng(seed)
+        self.maker = render.PictureMaker(None, None, settings, seed)
         self.level = level
         self.maker._composite = lambda: np.full((200, 200, 3), level, np.uint8)
 

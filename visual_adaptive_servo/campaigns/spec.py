@@ -37,7 +37,8 @@ At least one of ``cases``, ``grid`` and ``random`` is given; together they
 multiply: every draw runs every case with every grid combination (draws
 outermost, so the cases and controllers of one draw see the same conditions).
 That is how ``vas compare`` (a grid of controller x condition, the conditions
-as cases) and ``vas robustness`` (named cases) are expressed.
+as cases) and ``vas robustness`` (named cases) are expressed.  A ``duration``
+factor gives one case (or grid level) its own simulated seconds.
 
 Factors (:data:`FACTOR_HELP`):
 
@@ -101,7 +102,8 @@ TOP_LEVEL = ("base", "duration", "description", "fixed", "cases", "grid", "rando
 FACTOR_HELP = ("set.<section.param>, scale.<section.param>, pixel_noise, camera_latency, seed, "
                "start_offset_px, start_offset_angle_deg, start_offset_joint, "
                f"estimate_scale.<{'|'.join(ESTIMATES)}>, gain_scale.<{'|'.join(GAINS)}>, "
-               "trajectory.amplitude_scale, trajectory.frequency_scale, controller, base")
+               "trajectory.amplitude_scale, trajectory.frequency_scale, controller, base, "
+               "duration")
 _PARAM_NAMES = {SIM_SECTION: {s.name for s in SIM_PARAMS},
                 CONTROLLER_SECTION: {s.name for s in CONTROLLER_PARAMS}}
 
@@ -240,8 +242,8 @@ class CampaignSpec:
                 scenarios[base] = load_scenario(base)
             controller = factors.get("controller", DEFAULT_CONTROLLER)
             overrides, problem = resolve_overrides(factors, scenarios[base])
-            runs.append(Run(run_id, varying, base, self.duration, controller, overrides,
-                            problem))
+            duration = float(factors.get("duration", self.duration))
+            runs.append(Run(run_id, varying, base, duration, controller, overrides, problem))
         return runs
 
 
@@ -318,7 +320,7 @@ def factor_targets(key, path, where):
         return tuple(f"{CONTROLLER_SECTION}.{t}" for t in TRAJECTORY_SCALES[key])
     if key in START_KEYS:
         return ("start",)
-    if key in ("controller", "base"):
+    if key in ("controller", "base", "duration"):
         return (key,)
     _fail(path, where, f"unknown factor {key!r} (factors: {FACTOR_HELP})")
 
@@ -333,6 +335,9 @@ def check_value(key, value, spec_dir, path, where):
     elif key == "seed":
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**31:
             _fail(path, where, f"must be an integer in [0, 2**31), got {value!r}")
+    elif key == "duration":
+        if not _is_number(value) or value <= 0:
+            _fail(path, where, f"must be a number of seconds > 0, got {value!r}")
     elif key in ("pixel_noise", "camera_latency", "start_offset_px"):
         if not _is_number(value) or value < 0:
             _fail(path, where, f"must be a number >= 0, got {value!r}")

@@ -102,6 +102,11 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
     ParamSpec("picture.gamma", 1.0, "float",
               "Rendered pictures: gamma, the picture is I^(1/gamma) after the noise; 1 = linear.",
               0.2, 5.0),
+    ParamSpec("picture.whole_every", 1, "int",
+              "Rendered pictures of a tag: the whole picture is rendered at every "
+              "whole_every-th frame; at the frames between only a window around the tag, "
+              "pasted into the last whole picture (the window is exact, the arm outside it "
+              "is up to whole_every - 1 frames old); 1 = every picture whole.", 1, 1000),
     ParamSpec("faults.nan_pixels", [0.0, 0.0], "float_list",
               "Fault injection: frames captured in [start, start + length] carry NaN pixels "
               "[s, s]; length 0 = off.", 0.0, None),

@@ -109,6 +109,10 @@ class TagPlate:
         """(4, 3) the black square's corners in the tip frame, in :data:`CORNER_NAMES` order."""
         return self.to_tip(self.tag_frame_points(CORNER_NAMES))
 
+    def plate_corners(self):
+        """(4, 3) the white plate's corners in the tip frame, in :data:`CORNER_NAMES` order."""
+        return self.to_tip(self.tag_frame_points(CORNER_NAMES) * (self.plate_edge / self.edge))
+
     @property
     def plate_edge(self):
         """Side of the white plate [m]: the black square plus ``margin`` cells each side."""
