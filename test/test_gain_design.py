@@ -14,9 +14,9 @@
 
 """Gains derived from the arm (control/gain_design.py), on an arm the package does not ship.
 
-The arm is written here: a SCARA-type arm (two revolute joints and a prismatic
-lift) on a tilted, rotated fixed mount, one point on its quill, every length
-and the camera unknown, and no gain in its configuration.  Oracles: the
+The arm is docs/examples/scara/scara.urdf: a SCARA-type arm (two revolute
+joints and a prismatic lift) on a tilted, rotated fixed mount, one point on its
+quill, every length and the camera unknown, and no gain in its configuration.  Oracles: the
 eigenvalues the normalisation promises, the discrete velocity loop iterated
 directly for the sampled-data margin, and the closed loop itself (clean camera,
 a real camera, both pixel conventions).
@@ -24,6 +24,7 @@ a real camera, both pixel conventions).
 
 import json
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -36,46 +37,11 @@ from visual_adaptive_servo.control.gain_design import (DesignSettings, normalize
 from visual_adaptive_servo.runner import run_scenario
 from visual_adaptive_servo.schema import ConfigError
 
-SCARA_URDF = """<?xml version="1.0"?>
-<robot name="test_scara">
-  <link name="world"/>
-  <link name="base_link">
-    <inertial><origin xyz="0 0 0.1"/><mass value="5.0"/>
-      <inertia ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.03"/></inertial>
-  </link>
-  <joint name="mount" type="fixed">
-    <parent link="world"/><child link="base_link"/>
-    <origin xyz="0 0 0.2" rpy="0.25 0 0.1"/>
-  </joint>
-  <link name="arm1">
-    <inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
-      <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.03"/></inertial>
-  </link>
-  <joint name="shoulder" type="revolute">
-    <parent link="base_link"/><child link="arm1"/>
-    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="100" velocity="3"/>
-  </joint>
-  <link name="arm2">
-    <inertial><origin xyz="0.15 0 0"/><mass value="1.2"/>
-      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>
-  </link>
-  <joint name="elbow" type="revolute">
-    <parent link="arm1"/><child link="arm2"/>
-    <origin xyz="0.4 0 0.05"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="60" velocity="3"/>
-  </joint>
-  <link name="quill">
-    <inertial><origin xyz="0 0 -0.1"/><mass value="0.5"/>
-      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0002"/></inertial>
-  </link>
-  <joint name="lift" type="prismatic">
-    <parent link="arm2"/><child link="quill"/>
-    <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/>
-    <limit lower="-0.3" upper="0.3" effort="200" velocity="1"/>
-  </joint>
-</robot>
-"""
+#: the arm, as a user finds it: docs/examples/scara/ (scara.yaml there is this scenario
+#: with a real camera and the URDF's torque limits)
+EXAMPLE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                           "docs", "examples", "scara")
+SCARA_URDF_PATH = os.path.join(EXAMPLE_DIR, "scara.urdf")
 
 CAMERA = ("orientation: look_at", "up: [0.0, 0.0, 1.0]", "principal_point: [320.0, 240.0]",
           "image_size: [640.0, 480.0]", "pixel_origin: [{origin}]", "pixel_axes: [1.0, 1.0]")
@@ -127,7 +93,7 @@ START_TOP_LEFT = np.array([373.213952, 195.6280614])
 
 def write_scenario(folder, centred=False, rate=0.0, latency=0.0):
     """The unshipped arm's parameter file in ``folder``, in either pixel convention."""
-    folder.joinpath("scara.urdf").write_text(SCARA_URDF)
+    shutil.copy(SCARA_URDF_PATH, folder / "scara.urdf")
     origin = np.array([320.0, 240.0]) if centred else np.zeros(2)
     start = START_TOP_LEFT - origin
     bounds = [-320.0, 320.0, -240.0, 240.0] if centred else [0.0, 640.0, 0.0, 480.0]
@@ -255,3 +221,14 @@ def test_unshipped_arm_tracks_on_defaults_with_a_real_camera(tmp_path):
                     "sim_node.pixel_noise_std=0.5", "sim_node.seed=11"))
     assert not summary["diverged"], summary["divergence_reason"]
     assert summary["final_rms_true_error_px"] < 0.5
+
+
+def test_example_file_loads_and_runs_with_its_real_camera(tmp_path):
+    path = os.path.join(EXAMPLE_DIR, "scara.yaml")
+    scenario = load_scenario(path)
+    assert (scenario.sim.camera_rate, scenario.sim.camera_latency,
+            scenario.sim.pixel_noise_std) == (30.0, 0.033, 0.5)
+    assert (scenario.controller.camera_rate, scenario.controller.camera_latency) == (30.0, 0.033)
+    summary = _run(path, tmp_path / "run", 1.0)
+    assert not summary["diverged"], summary["divergence_reason"]
+    assert summary["start_report"][0].startswith("n = 3 joints, m = 1 points")
