@@ -167,3 +167,15 @@ def test_the_scale_makes_the_tracking_better_than_the_papers_observer(tmp_path):
     assert {float(r["motion_scale"]) for r in rows_off} == {1.0}
     assert not on["diverged"] and not off["diverged"]
     assert on["final_rms_true_error_px"] < 0.9 * off["final_rms_true_error_px"]
+
+
+def test_a_rejected_sample_reports_the_scale_it_keeps(tmp_path):
+    from visual_adaptive_servo.config.scenario import load_scenario
+    from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
+
+    scenario = load_scenario("config/paper_3dof_urdf.yaml")
+    tracker = AdaptiveVisualTracker(scenario.controller)
+    tracker.scale.value = 0.7
+    q = np.asarray(scenario.sim.initial_positions, dtype=float)
+    result = tracker.step(0.0, q, np.zeros(q.size), np.full(2, np.nan))   # NaN pixels
+    assert result.status != "ok" and result.motion_scale == 0.7

@@ -1002,7 +1002,8 @@ class AdaptiveVisualTracker:
         z_hat = (self.model.depth(q, self.state.a_z) if q is not None
                  else np.full(self.model.m, np.nan))
         return StepResult(t, tau, xd, self.state.x_obs, np.full(2 * self.model.m, np.nan), z_hat,
-                          self.state, status, tuple(problems))
+                          self.state, status, tuple(problems),
+                          motion_scale=1.0 if self.scale is None else self.scale.value)
 
     def fallback_torque(self, q, qd):
         """Safe torque when no valid control can be computed.
