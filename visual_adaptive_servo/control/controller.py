@@ -816,7 +816,7 @@ class AdaptiveVisualTracker:
         self.last_tau, self.t_last_tau = tau, t
         return StepResult(t, tau, xd, state.x_obs, x - xd, out.z_hat, state, "ok", (),
                           saturated, out.projection_active, out.damped, out.sigma_min, out.tau,
-                          motion_scale=1.0 if self.scale is None else self.scale.value)
+                          motion_scale=self._scale_value)
 
     def _design(self, q):
         """Fix the joint damping and derive the gains left out, at the first valid joint sample.
@@ -942,6 +942,11 @@ class AdaptiveVisualTracker:
                      value["Gamma_z"], D if np.any(D) else None, leakage)
 
     @property
+    def _scale_value(self):
+        """s of the image-motion scale in effect (1 when it is off)."""
+        return 1.0 if self.scale is None else self.scale.value
+
+    @property
     def _integral(self):
         return self.config["reference.integral_rate"] > 0.0
 
@@ -1002,8 +1007,7 @@ class AdaptiveVisualTracker:
         z_hat = (self.model.depth(q, self.state.a_z) if q is not None
                  else np.full(self.model.m, np.nan))
         return StepResult(t, tau, xd, self.state.x_obs, np.full(2 * self.model.m, np.nan), z_hat,
-                          self.state, status, tuple(problems),
-                          motion_scale=1.0 if self.scale is None else self.scale.value)
+                          self.state, status, tuple(problems), motion_scale=self._scale_value)
 
     def fallback_torque(self, q, qd):
         """Safe torque when no valid control can be computed.

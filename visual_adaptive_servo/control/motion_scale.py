@@ -46,6 +46,8 @@ from math import exp, log
 
 import numpy as np
 
+from .prediction import TIME_EPS, trim_buffers
+
 
 class MotionScale:
     """The scale s of the estimated image motion, learnt from camera frames.
@@ -104,12 +106,11 @@ class MotionScale:
         self.path.append(p)
         self.speed.append(speed)
         if t - self.times[0] > 1.5 * self.horizon:
-            first = max(bisect.bisect_left(self.times, t - self.horizon) - 1, 0)
-            del self.times[:first], self.path[:first], self.speed[:first]
+            trim_buffers(self.times, t, self.horizon, self.path, self.speed)
 
     def path_at(self, stamp):
         """P at ``stamp`` (None before the first joint sample at or before it)."""
-        i = bisect.bisect_right(self.times, stamp + 1e-9) - 1
+        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1
         if i < 0:
             return None
         return self.path[i] + (stamp - self.times[i]) * self.speed[i]

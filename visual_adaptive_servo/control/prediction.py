@@ -187,6 +187,15 @@ class FramePredictor:
             self._trim(t)
 
     def _trim(self, t):
-        """Drop the samples older than the horizon (keeping one at or before it)."""
-        first = max(bisect.bisect_left(self.times, t - self.horizon - TIME_EPS) - 1, 0)
-        del self.times[:first], self.rates[:first], self.history[:first]
+        trim_buffers(self.times, t, self.horizon, self.rates, self.history)
+
+
+def trim_buffers(times, t, horizon, *columns):
+    """Drop the joint samples older than ``horizon`` before ``t`` (keeping one at or before it).
+
+    ``times`` is increasing; each of ``columns`` is a list with one entry per time.
+    """
+    first = max(bisect.bisect_left(times, t - horizon - TIME_EPS) - 1, 0)
+    del times[:first]
+    for column in columns:
+        del column[:first]
