@@ -43,7 +43,7 @@ from visual_adaptive_servo.campaigns.tune import (
     STUDY_NAME,
     TuneSettings,
 )
-from visual_adaptive_servo.campaigns.tune_report import tuned_text
+from visual_adaptive_servo.campaigns.tune_report import repointed_text, tuned_text
 from visual_adaptive_servo.campaigns.tune_space import DEFAULT_SPACE, load_space, SpaceError
 from visual_adaptive_servo.config.files import read_param_file
 from visual_adaptive_servo.config.scenario import load_scenario
@@ -244,6 +244,37 @@ def test_tuned_text_writes_values_in_place_and_keeps_the_file(tmp_path):
     assert "alpha: 7.5  # vas tune    # observer" in new
     assert "frame_gain: 0.5  # vas tune, added" in new
     assert "# about the detector\nfeature_detector:" in new        # nothing added below it
+
+
+def test_relative_file_names_are_repointed_to_the_tuning_folder(tmp_path, monkeypatch):
+    # the SCARA example names its URDF relative to its own folder; tuned.yaml is written
+    # into another folder and must load the same arm from there (a package:// name stays)
+    arm = tmp_path / "my_arm"
+    arm.mkdir()
+    scara = os.path.join(ROOT, "docs", "examples", "scara")
+    for name in ("scara.urdf", "scara.yaml"):
+        (arm / name).write_text(open(os.path.join(scara, name), encoding="utf-8").read())
+    out = tmp_path / "runs" / "tune"
+    out.mkdir(parents=True)
+    config = str(arm / "scara.yaml")
+    text = (arm / "scara.yaml").read_text()
+    new, moved = repointed_text(text, config, str(out))
+    assert [m[0] for m in moved] == ["sim_node.urdf", "controller_node.urdf"]
+    assert all(m[2] == os.path.join("..", "..", "my_arm", "scara.urdf") for m in moved)
+    (out / "tuned.yaml").write_text(new)
+    monkeypatch.chdir(tmp_path / "runs")      # neither folder is the current one
+    before, after = load_scenario(config), load_scenario(str(out / "tuned.yaml"))
+    for b, a in ((before.sim.params, after.sim.params),
+                 (before.controller.params, after.controller.params)):
+        assert a.keys() == b.keys()
+        for name, value in b.items():
+            if name != "urdf":
+                np.testing.assert_array_equal(a[name], value, err_msg=name)
+    # the same URDF file, read from the new name
+    assert os.path.samefile(after.sim.arm.chain.urdf, before.sim.arm.chain.urdf)
+    np.testing.assert_array_equal(after.sim.arm.chain.root_to_base, before.sim.arm.chain.root_to_base)
+    assert repointed_text(open(PAPER, encoding="utf-8").read(), PAPER, str(out)) \
+        == (open(PAPER, encoding="utf-8").read(), [])
 
 
 # -- a tuning end to end ---------------------------------------------------------------

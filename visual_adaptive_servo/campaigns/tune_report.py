@@ -31,10 +31,14 @@ import numpy as np
 import yaml
 
 from ..config.scenario import load_scenario
-from ..schema import CONTROLLER_SECTION, ConfigError
+from ..models.resources import resolve_path
+from ..schema import CONTROLLER_SECTION, SIM_SECTION, ConfigError
 from .spec import yaml_text
 
 TUNED_NAME = "tuned.yaml"
+#: parameters that name files, relative to the parameter file's folder (config/scenario.py)
+PATH_PARAMS = ((SIM_SECTION, "urdf"), (CONTROLLER_SECTION, "urdf"),
+               (CONTROLLER_SECTION, "trajectory.file"))
 REPORT_NAME = "report.md"
 OBJECTIVE_PLOT = "objective_over_trials.png"
 GAINS_PLOT = "gains_vs_objective.png"
@@ -84,6 +88,40 @@ def yaml_value(value):
     float to every reader.
     """
     return re.sub(r"(?<![\w.])(-?\d+)e([-+]\d+)", r"\1.0e\2", yaml_text(value))
+
+
+def repointed_text(text, config, out_dir):
+    """``text`` (the file ``config``) with its relative file names made relative to ``out_dir``.
+
+    A relative name in a parameter file is looked up from the current folder, then
+    from the file's folder (:func:`.resources.resolve_path`); tuned.yaml lives in
+    ``out_dir``, so each relative name that resolves is rewritten to the same file
+    seen from there.  ``package://``, ``pybullet_data://`` and absolute names stay.
+    Returns (text, [(parameter, old, new)]).
+    """
+    root = yaml.compose(text)
+    if not isinstance(root, yaml.MappingNode):
+        return text, []
+    search_dirs = (os.path.dirname(os.path.abspath(config)),)
+    edits, changed = [], []
+    for section_name, name in PATH_PARAMS:
+        section = _mapping_value(root, section_name) or _mapping_value(root, "/" + section_name)
+        params = _mapping_value(section, "ros__parameters") if section is not None else None
+        node = _find(params, name)
+        if not isinstance(node, yaml.ScalarNode) or not node.value or "://" in node.value \
+                or os.path.isabs(node.value):
+            continue
+        try:
+            target = resolve_path(node.value, search_dirs)
+        except FileNotFoundError:
+            continue    # load_scenario said so already; the check below says it again
+        new = os.path.relpath(target, os.path.abspath(out_dir))
+        if new != node.value:
+            edits.append((node.start_mark.index, node.end_mark.index, yaml_value(new)))
+            changed.append((f"{section_name}.{name}", node.value, new))
+    for start, end, new in sorted(edits, reverse=True):
+        text = text[:start] + new + text[end:]
+    return text, changed
 
 
 def tuned_text(text, values, comments, header):
@@ -192,9 +230,11 @@ def write_outputs(tuning, study, optuna, best, values, held_out, notes, wall, in
             header += [_figures_line(f"held-out ({s.held_out} runs, other seeds), tuned",
                                      held_out["tuned"]),
                        _figures_line("held-out, the file's gains", held_out["file"])]
-        header += [verdict, "changed: " + ("; ".join(changes) or "nothing"), ""]
         with open(s.config, encoding="utf-8") as handle:
-            text = handle.read()
+            text, moved = repointed_text(handle.read(), s.config, out_dir)
+        header += [verdict, "changed: " + ("; ".join(changes) or "nothing")]
+        header += [f"{param}: {old!r} -> {new!r} (the same file, named from this folder)"
+                   for param, old, new in moved] + [""]
         tuned_path = os.path.join(out_dir, TUNED_NAME)
         with open(tuned_path, "w", encoding="utf-8") as handle:
             handle.write(tuned_text(text, values, comments, _wrap(header)))
