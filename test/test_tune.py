@@ -295,7 +295,8 @@ def test_two_trial_tuning_on_the_paper_arm_writes_valid_outputs_and_resumes(tmp_
         scale.controller_node.K: {low: 1.5, high: 3.0, log: true}
         """)
     out = tmp_path / "tune"
-    report = run_tuning(_settings(out, space=space))
+    camera = {"camera_rate": 100.0, "camera_latency": 0.01}
+    report = run_tuning(_settings(out, space=space, **camera))
     for name in ("tuned.yaml", "report.md", "objective_over_trials.png", "gains_vs_objective.png",
                  STUDY_DB, "training_runs.yaml", "held_out_runs.yaml"):
         assert (out / name).stat().st_size > 0, name
@@ -305,12 +306,21 @@ def test_two_trial_tuning_on_the_paper_arm_writes_valid_outputs_and_resumes(tmp_
     tuned = load_scenario(str(out / "tuned.yaml"))
     alpha, gamma = best.params["controller_node.alpha"], best.params["controller_node.gamma"]
     k = [0.001 * best.params["scale.controller_node.K"]] * 2
+    # ... and the camera tuned for: the controller told it, the simulator simulating it
+    told = [f"{section}.{name}={value!r}" for section in ("sim_node", "controller_node")
+            for name, value in camera.items()]
     oracle = load_scenario(PAPER, [f"controller_node.alpha={alpha!r}",
                                    f"controller_node.gamma={gamma!r}",
-                                   f"controller_node.K=[{k[0]!r}, {k[1]!r}]"])
-    assert tuned.controller.params.keys() == oracle.controller.params.keys()
-    for name, value in oracle.controller.params.items():
-        np.testing.assert_array_equal(tuned.controller.params[name], value, err_msg=name)
+                                   f"controller_node.K=[{k[0]!r}, {k[1]!r}]"] + told)
+    for got, want in ((tuned.controller.params, oracle.controller.params),
+                      (tuned.sim.params, oracle.sim.params)):
+        assert got.keys() == want.keys()
+        for name, value in want.items():
+            np.testing.assert_array_equal(got[name], value, err_msg=name)
+    assert tuned.controller.params["camera_rate"] == tuned.sim.params["camera_rate"] == 100.0
+    runs = load_spec(str(out / "training_runs.yaml"))
+    for _, factors in runs.factor_sets():
+        assert factors["set.controller_node.camera_latency"] == 0.01
     text = (out / "tuned.yaml").read_text()
     assert "# the paper's gains" in text and text.count("# vas tune") >= 3
     assert text.startswith("# vas tune: paper_3dof.yaml with the gains of trial")
@@ -330,7 +340,7 @@ def test_two_trial_tuning_on_the_paper_arm_writes_valid_outputs_and_resumes(tmp_
     scenario = load_scenario(PAPER)
     load_space(space, scenario, read_param_file(PAPER)["controller_node"]).suggest(
         stale.ask(), scenario.controller.params)
-    report = run_tuning(_settings(out, space=space, trials=4))
+    report = run_tuning(_settings(out, space=space, trials=4, **camera))
     trials = optuna.load_study(study_name=STUDY_NAME, storage=storage).trials
     state = optuna.trial.TrialState
     assert [t.state for t in trials] == [state.COMPLETE] * 2 + [state.FAIL] + [state.COMPLETE] * 2
@@ -342,12 +352,12 @@ def test_two_trial_tuning_on_the_paper_arm_writes_valid_outputs_and_resumes(tmp_
     assert report["trials"] == 5
     # nothing left to do: a third call runs no trial and takes the held-out figures from
     # its cache, so it reports the same
-    again = run_tuning(_settings(out, space=space, trials=4))
+    again = run_tuning(_settings(out, space=space, trials=4, **camera))
     assert len(optuna.load_study(study_name=STUDY_NAME, storage=storage).trials) == 5
     assert again["held_out"] == report["held_out"] and again["verdict"] == report["verdict"]
     # another setting is another tuning: refused, the study untouched
     with pytest.raises(CampaignError, match="holds a tuning of other settings"):
-        run_tuning(_settings(out, space=space, runs_per_trial=3))
+        run_tuning(_settings(out, space=space, runs_per_trial=3, **camera))
 
 
 def test_a_trial_whose_first_runs_diverge_is_pruned(tmp_path):

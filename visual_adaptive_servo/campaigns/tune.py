@@ -140,16 +140,33 @@ class TuneSettings:
         number("camera-latency", self.camera_latency, 0.0)
         number("pixel-noise", self.pixel_noise, 0.0)
 
+    def camera_values(self):
+        """{section: {param: value}} of the camera asked for.
+
+        The simulated camera gets the rate, latency and noise; the controller is told
+        the rate and latency, as a user writes them into ``controller_node`` (its
+        derived gains and frame prediction follow from them, docs/gain_design.md).
+        """
+        sim, ctrl = {}, {}
+        if self.camera_rate is not None:
+            sim["camera_rate"] = ctrl["camera_rate"] = float(self.camera_rate)
+        if self.camera_latency is not None:
+            sim["camera_latency"] = ctrl["camera_latency"] = float(self.camera_latency)
+        if self.pixel_noise is not None:
+            sim["pixel_noise_std"] = float(self.pixel_noise)
+        return {SIM_SECTION: sim, CONTROLLER_SECTION: ctrl}
+
+    def camera_overrides(self):
+        """:meth:`camera_values` as ``--set`` overrides."""
+        return [f"{section}.{name}={value!r}"
+                for section, values in self.camera_values().items()
+                for name, value in values.items()]
+
     def fixed_factors(self):
         """The camera conditions every run shares (campaign factors)."""
-        fixed = {}
-        if self.camera_rate is not None:
-            fixed["set.sim_node.camera_rate"] = float(self.camera_rate)
-        if self.camera_latency is not None:
-            fixed["camera_latency"] = float(self.camera_latency)
-        if self.pixel_noise is not None:
-            fixed["pixel_noise"] = float(self.pixel_noise)
-        return fixed
+        return {f"set.{section}.{name}": value
+                for section, values in self.camera_values().items()
+                for name, value in values.items()}
 
     def runs_spec(self, runs, draw_seed):
         """A campaign spec (as a dict) of ``runs`` randomized runs of the configuration."""
@@ -296,7 +313,7 @@ def prepare(settings):
     _import_optuna()
     if not os.path.isfile(settings.config):
         raise CampaignError(f"--config {settings.config}: no such file")
-    scenario = load_scenario(settings.config)
+    scenario = load_scenario(settings.config, settings.camera_overrides())
     file_params = read_param_file(settings.config)[CONTROLLER_SECTION]
     space_path = settings.space or DEFAULT_SPACE
     space = load_space(space_path, scenario, file_params, drop_shadowed=settings.space is None)

@@ -36,9 +36,11 @@ from ..schema import CONTROLLER_SECTION, SIM_SECTION, ConfigError
 from .spec import yaml_text
 
 TUNED_NAME = "tuned.yaml"
+CAMERA_NOTE = "vas tune: the camera tuned for"
 #: parameters that name files, relative to the parameter file's folder (config/scenario.py)
 PATH_PARAMS = ((SIM_SECTION, "urdf"), (CONTROLLER_SECTION, "urdf"),
                (CONTROLLER_SECTION, "trajectory.file"))
+FILE_NAMES = {name for _, name in PATH_PARAMS}
 REPORT_NAME = "report.md"
 OBJECTIVE_PLOT = "objective_over_trials.png"
 GAINS_PLOT = "gains_vs_objective.png"
@@ -124,20 +126,31 @@ def repointed_text(text, config, out_dir):
     return text, changed
 
 
-def tuned_text(text, values, comments, header):
+def tuned_text(text, values, comments, header, sections=None):
     """The parameter file ``text`` with ``values`` ({param: value}) written in.
 
     ``comments`` ({param: text}) go after each value; ``header`` (lines) above
     the file.  Values are written in YAML flow style (:func:`yaml_value`).
+    ``values`` go into ``controller_node``; ``sections`` ({section: ({param:
+    value}, comment)}) into other sections the file has.
     """
+    text = _write_into(text, CONTROLLER_SECTION, values, comments)
+    for name, (more, note) in (sections or {}).items():
+        text = _write_into(text, name, more, dict.fromkeys(more, note))
+    return "".join(f"# {line}\n".replace("# \n", "#\n") for line in header) + text
+
+
+def _write_into(text, section_name, values, comments):
+    if not values:
+        return text
     root = yaml.compose(text)
     section = None
     if isinstance(root, yaml.MappingNode):
-        section = (_mapping_value(root, CONTROLLER_SECTION)
-                   or _mapping_value(root, "/" + CONTROLLER_SECTION))
+        section = (_mapping_value(root, section_name)
+                   or _mapping_value(root, "/" + section_name))
     params = _mapping_value(section, "ros__parameters") if section is not None else None
     if not isinstance(params, yaml.MappingNode) or not params.value:
-        raise ValueError(f"no '{CONTROLLER_SECTION}: ros__parameters:' mapping to write into")
+        raise ValueError(f"no '{section_name}: ros__parameters:' mapping to write into")
     edits, added = [], []
     for name, value in values.items():
         note = f"  # {comments[name]}" if comments.get(name) else ""
@@ -155,7 +168,7 @@ def tuned_text(text, values, comments, header):
         edits.append((at, at, block if text[at - 1:at] in ("\n", "") else "\n" + block))
     for start, end, new in sorted(edits, reverse=True):
         text = text[:start] + new + text[end:]
-    return "".join(f"# {line}\n".replace("# \n", "#\n") for line in header) + text
+    return text
 
 
 def _changes(space, best_params, base_values, values):
@@ -233,13 +246,21 @@ def write_outputs(tuning, study, optuna, best, values, held_out, notes, wall, in
         with open(s.config, encoding="utf-8") as handle:
             text, moved = repointed_text(handle.read(), s.config, out_dir)
         header += [verdict, "changed: " + ("; ".join(changes) or "nothing")]
+        camera = s.camera_values()
+        if any(camera.values()):
+            header.append("the camera tuned for (--camera-rate, --camera-latency, --pixel-noise) "
+                          "is written in too: the controller is told its rate and latency, "
+                          "the simulator simulates it")
         header += [f"{param}: {old!r} -> {new!r} (the same file, named from this folder)"
                    for param, old, new in moved] + [""]
+        told = {**camera[CONTROLLER_SECTION], **values}
+        comments = {**dict.fromkeys(camera[CONTROLLER_SECTION], CAMERA_NOTE), **comments}
         tuned_path = os.path.join(out_dir, TUNED_NAME)
         with open(tuned_path, "w", encoding="utf-8") as handle:
-            handle.write(tuned_text(text, values, comments, _wrap(header)))
+            handle.write(tuned_text(text, told, comments, _wrap(header),
+                                    {SIM_SECTION: (camera[SIM_SECTION], CAMERA_NOTE)}))
         outputs.append(TUNED_NAME)
-        notes = notes + _check_tuned(tuned_path, s.config, values)
+        notes = notes + _check_tuned(tuned_path, s.config, told, camera[SIM_SECTION])
     plots = plot_tuning(trials, tuning.space, optuna, out_dir)
     lines = _markdown(tuning, trials, best, held_out, notes, wall, verdict, changes, plots,
                       optuna, train, held)
@@ -250,17 +271,20 @@ def write_outputs(tuning, study, optuna, best, values, held_out, notes, wall, in
             "held_out": held_out, "trials": len(trials), "wall_time_s": wall}
 
 
-def _check_tuned(tuned_path, config, values):
+def _check_tuned(tuned_path, config, values, sim_values):
     """tuned.yaml must load to the configuration the best trial's runs had; notes if not."""
-    expected = load_scenario(config, [f"{CONTROLLER_SECTION}.{k}={yaml_text(v)}"
-                                      for k, v in values.items()]).controller.params
+    overrides = [f"{CONTROLLER_SECTION}.{k}={yaml_text(v)}" for k, v in values.items()]
+    overrides += [f"{SIM_SECTION}.{k}={yaml_text(v)}" for k, v in sim_values.items()]
+    expected = load_scenario(config, overrides)
     try:
-        got = load_scenario(tuned_path).controller.params
+        got = load_scenario(tuned_path)
     except (ConfigError, FileNotFoundError) as exc:
-        return [f"{TUNED_NAME} does not load from {os.path.dirname(tuned_path)} ({exc}): it names "
-                f"files relative to {os.path.dirname(os.path.abspath(config))}; put it there"]
-    wrong = [k for k in expected if not np.array_equal(np.asarray(got[k], dtype=object),
-                                                       np.asarray(expected[k], dtype=object))]
+        return [f"{TUNED_NAME} does not load from {os.path.dirname(tuned_path)} ({exc})"]
+    wrong = [f"{section}.{k}" for section, e, g in
+             ((CONTROLLER_SECTION, expected.controller.params, got.controller.params),
+              (SIM_SECTION, expected.sim.params, got.sim.params))
+             for k in e if k not in FILE_NAMES and not np.array_equal(np.asarray(g[k], dtype=object),
+                                                              np.asarray(e[k], dtype=object))]
     if wrong:
         raise RuntimeError(f"{tuned_path}: {wrong} differ from the tuned runs' values")
     return []
