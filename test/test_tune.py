@@ -272,7 +272,8 @@ def test_relative_file_names_are_repointed_to_the_tuning_folder(tmp_path, monkey
                 np.testing.assert_array_equal(a[name], value, err_msg=name)
     # the same URDF file, read from the new name
     assert os.path.samefile(after.sim.arm.chain.urdf, before.sim.arm.chain.urdf)
-    np.testing.assert_array_equal(after.sim.arm.chain.root_to_base, before.sim.arm.chain.root_to_base)
+    np.testing.assert_array_equal(after.sim.arm.chain.root_to_base,
+                                  before.sim.arm.chain.root_to_base)
     assert repointed_text(open(PAPER, encoding="utf-8").read(), PAPER, str(out)) \
         == (open(PAPER, encoding="utf-8").read(), [])
 

@@ -280,11 +280,14 @@ def _check_tuned(tuned_path, config, values, sim_values):
         got = load_scenario(tuned_path)
     except (ConfigError, FileNotFoundError) as exc:
         return [f"{TUNED_NAME} does not load from {os.path.dirname(tuned_path)} ({exc})"]
+
+    def same(a, b):
+        return np.array_equal(np.asarray(a, dtype=object), np.asarray(b, dtype=object))
+
     wrong = [f"{section}.{k}" for section, e, g in
              ((CONTROLLER_SECTION, expected.controller.params, got.controller.params),
               (SIM_SECTION, expected.sim.params, got.sim.params))
-             for k in e if k not in FILE_NAMES and not np.array_equal(np.asarray(g[k], dtype=object),
-                                                              np.asarray(e[k], dtype=object))]
+             for k in e if k not in FILE_NAMES and not same(g[k], e[k])]
     if wrong:
         raise RuntimeError(f"{tuned_path}: {wrong} differ from the tuned runs' values")
     return []
