@@ -69,6 +69,7 @@ MIN_SEARCH_MARGIN = 16  # px, at least
 BORDER_MARGIN = 3.0     # px between a corner and the picture's border
 PROFILE_STEP = 0.1      # px between the samples across an edge
 MAX_REFINEMENTS = 5
+CROP_MARGIN = 12.0      # px around the corners that the edge fit reads
 MIN_EDGE_CONTRAST = 20.0   # 8-bit levels between the dark border and the white margin
 
 
@@ -144,10 +145,23 @@ class TagDetector:
 
     def __init__(self, config):
         self.config = config
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
-        params.aprilTagQuadSigma = QUAD_SIGMA
-        self._aruco = cv2.aruco.ArucoDetector(_dictionary(config.family), params)
+        quads = cv2.aruco.DetectorParameters()
+        quads.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
+        quads.aprilTagQuadSigma = QUAD_SIGMA
+        quick = cv2.aruco.DetectorParameters()
+        quick.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+        family = _dictionary(config.family)
+        # every candidate quad is decoded against the dictionary: against the family's one
+        # tag that costs a fifth of the whole family (587 codes in 36h11); a quad of another
+        # id is rejected all the same (its code is >= 11 bits from this one, beyond the
+        # error correction), and only a miss asks the whole family which ids are there
+        one = cv2.aruco.Dictionary(family.bytesList[config.tag_id:config.tag_id + 1],
+                                   family.markerSize, family.maxCorrectionBits)
+        self._quads = cv2.aruco.ArucoDetector(one, quads)
+        # near the last position first ArUco's own contour quads (a third of the AprilTag
+        # quad search's time; they miss some tags over ~150 px, which the quad search finds)
+        self._quick = cv2.aruco.ArucoDetector(one, quick)
+        self._family = cv2.aruco.ArucoDetector(family, quads)
         self._cells = CELLS[config.family]
         self.last_corners = None    # (4, 2) image points of the last detection
 
@@ -159,7 +173,10 @@ class TagDetector:
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         corners, why = None, ""
         if self.last_corners is not None:
-            corners, why = self._search(gray, self._window(gray.shape))
+            window = self._window(gray.shape)
+            corners, why = self._search(gray, window, quick=True)
+            if corners is None:
+                corners, why = self._search(gray, window)
         if corners is None:
             corners, why = self._search(gray, None)
         if corners is None:
@@ -188,19 +205,26 @@ class TagDetector:
         c1, r1 = int(min(np.ceil(high[0] + margin), w)), int(min(np.ceil(high[1] + margin), h))
         return r0, r1, c0, c1
 
-    def _search(self, gray, window):
-        """(corners (4, 2) image points, "") of the tag, or (None, why not)."""
+    def _search(self, gray, window, quick=False):
+        """(corners (4, 2) image points, "") of the tag, or (None, why not).
+
+        ``quick``: ArUco's contour quads instead of the AprilTag quad search.
+        """
         r0, r1, c0, c1 = window or (0, gray.shape[0], 0, gray.shape[1])
-        found, ids, _ = self._aruco.detectMarkers(gray[r0:r1, c0:c1])
-        ids = [] if ids is None else ids.reshape(-1).tolist()
-        mine = [k for k, i in enumerate(ids) if i == self.config.tag_id]
+        part = gray[r0:r1, c0:c1]
+        found, ids, _ = (self._quick if quick else self._quads).detectMarkers(part)
+        mine = 0 if ids is None else ids.size          # every id found is this tag's
         where = "" if window is None else " near its last position"
         if not mine:
-            return None, (f"tag {self.config.tag_id} missing{where} (ids found: "
-                          f"{sorted(set(ids)) or 'none'})")
-        if len(mine) > 1:
-            return None, f"tag {self.config.tag_id} ambiguous: found {len(mine)} times"
-        return np.asarray(found[mine[0]], float).reshape(4, 2) + (c0, r0), ""
+            others = [] if window is not None else self._family.detectMarkers(part)[1]
+            others = [] if others is None else sorted(set(np.ravel(others).tolist()))
+            return None, f"tag {self.config.tag_id} missing{where} (ids found: {others or 'none'})"
+        if mine > 1:
+            return None, f"tag {self.config.tag_id} ambiguous: found {mine} times"
+        # ArUco's contour corners count pixel centres from 0, this module's image points
+        # (and the AprilTag quads, nearly) the picture's corner (module docstring)
+        shift = 0.5 if quick else 0.0
+        return np.asarray(found[0], float).reshape(4, 2) + (c0 + shift, r0 + shift), ""
 
 
 def tag_points(corners, names):
@@ -223,7 +247,15 @@ def refine_corners(gray, corners, cells=8):
     ``gray`` (h, w) uint8; ``corners`` (4, 2) image points (col_c, row_c) of the dark
     square, in order around it.  None when an edge has too little contrast.
     """
-    image = gray.astype(np.float32)
+    # the profiles reach at most 4 px (plus a move of the corners) beyond the square: the
+    # fit works on that part of the picture only
+    h, w = gray.shape
+    (c0, r0), (c1, r1) = corners.min(axis=0) - CROP_MARGIN, corners.max(axis=0) + CROP_MARGIN
+    c0, r0 = max(int(c0), 0), max(int(r0), 0)
+    c1, r1 = min(int(np.ceil(c1)), w), min(int(np.ceil(r1)), h)
+    image = gray[r0:r1, c0:c1].astype(np.float32)
+    offset = np.array([c0, r0], dtype=float)
+    corners = corners - offset
     for _ in range(MAX_REFINEMENTS):
         new = _fit_edges(image, corners, cells)
         if new is None:
@@ -232,7 +264,7 @@ def refine_corners(gray, corners, cells=8):
         corners = new
         if moved < 0.01:
             break
-    return corners
+    return corners + offset
 
 
 def _fit_edges(image, corners, cells):
