@@ -108,12 +108,22 @@ def test_windowed_pictures_are_the_whole_ones_inside_the_window_and_the_last_who
         fast.close()
 
 
-def test_the_detector_finds_the_same_corners_in_windowed_pictures():
-    """The file's camera-like pictures (noise on, same seed): corners within 0.05 px."""
-    slow = _simulator("sim_node.picture.whole_every=1")
-    fast = _simulator("sim_node.picture.whole_every=5")
+@pytest.mark.parametrize("noisy", [False, True])
+def test_the_detector_finds_the_same_corners_in_windowed_pictures(noisy):
+    """The file's camera-like pictures: the same corners, windowed or whole.
+
+    Without the noise within 0.01 px (the renderings agree but for rasteriser ties).
+    With it, the window gets its own draws of the noise (the whole picture other ones):
+    the corners then differ by two independent noise errors, each 0.03 px RMS on the
+    synthetic warps with 2 % noise (test_apriltag.py): within 0.2 px, 0.08 px RMS.
+    """
+    quiet = () if noisy else ("sim_node.picture.read_noise=0.0",
+                              "sim_node.picture.shot_noise=0.0")
+    slow = _simulator(*quiet, "sim_node.picture.whole_every=1")
+    fast = _simulator(*quiet, "sim_node.picture.whole_every=5")
     scenario = load_scenario(CONFIG)
     detectors = [scenario.detector.detector(), scenario.detector.detector()]
+    differences = []
     try:
         for q in _poses(slow.config.initial_positions, 15):
             found = []
@@ -122,10 +132,50 @@ def test_the_detector_finds_the_same_corners_in_windowed_pictures():
                 result = detector.detect(sim._render())
                 assert result.pixels is not None, result.reason
                 found.append(detector.last_corners)
-            np.testing.assert_allclose(found[1], found[0], atol=0.05)
+            np.testing.assert_allclose(found[1], found[0], atol=0.2 if noisy else 0.01)
+            differences.append(np.linalg.norm(found[1] - found[0], axis=1))
         assert fast.pictures.windows == 12
     finally:
         slow.close()
+        fast.close()
+    rms = float(np.sqrt(np.mean(np.square(differences))))
+    print(f"corner differences: RMS {rms:.2g} px, max {np.max(differences):.2g} px")
+    assert rms <= (0.08 if noisy else 0.005)
+
+
+def test_only_the_windows_get_new_noise_and_no_old_tag_is_left():
+    """Noise on: outside the box of this picture's and the last one's windows, the last picture.
+
+    Inside that box a picture is new: where the last picture's window was and this one's
+    is not, the base (no plate) with new noise, so no copy of the tag is left and a
+    detector searching the whole picture finds the tag once.
+    """
+    fast = _simulator("sim_node.picture.whole_every=4")
+    detector = load_scenario(CONFIG).detector.detector()
+    try:
+        last, last_window = None, None
+        for q in _poses(fast.config.initial_positions, 8, 0.1):
+            fast.plant.reset(q)
+            picture = fast._render()
+            window = fast.pictures.last_window
+            if window is not None and last_window is not None:
+                # the box around both windows is made again
+                (c0, r0), (c1, r1) = (np.minimum(window[:2], last_window[:2]),
+                                      np.maximum(window[2:], last_window[2:]))
+                kept = np.ones(picture.shape[:2], bool)
+                kept[r0:r1, c0:c1] = False
+                assert kept.mean() > 0.8
+                np.testing.assert_array_equal(picture[kept], last[kept])
+                # the window's noise is new: the picture differs from the last one there
+                c0, r0, c1, r1 = window
+                assert np.mean(picture[r0:r1, c0:c1] != last[r0:r1, c0:c1]) > 0.5
+                # a fresh detector, searching the whole picture, finds the tag once
+                found = load_scenario(CONFIG).detector.detector().detect(picture)
+                assert found.pixels is not None, found.reason
+            last, last_window = picture, window if window is not None else None
+            assert detector.detect(picture).pixels is not None
+        assert fast.pictures.windows == 6
+    finally:
         fast.close()
 
 
