@@ -69,6 +69,7 @@ MIN_SEARCH_MARGIN = 16  # px, at least
 BORDER_MARGIN = 3.0     # px between a corner and the picture's border
 PROFILE_STEP = 0.1      # px between the samples across an edge
 MAX_REFINEMENTS = 5
+REMAP_COLUMNS = 1024
 CROP_MARGIN = 12.0      # px around the corners that the edge fit reads
 MIN_EDGE_CONTRAST = 20.0   # 8-bit levels between the dark border and the white margin
 
@@ -269,7 +270,7 @@ def refine_corners(gray, corners, cells=8):
 
 def _fit_edges(image, corners, cells):
     centre = corners.mean(axis=0)
-    lines = []
+    edges, maps = [], []
     for i in range(4):
         a, b = corners[i], corners[(i + 1) % 4]
         length = float(np.hypot(*(b - a)))
@@ -281,12 +282,22 @@ def _fit_edges(image, corners, cells):
         s = np.linspace(0.1 * length, 0.9 * length, max(int(0.8 * length), 8))
         offsets = np.arange(-half, half + 0.5 * PROFILE_STEP, PROFILE_STEP)
         grid = a + s[:, None, None] * along + offsets[None, :, None] * normal
-        # remap samples at array indices: the centre of pixel [r, c] is (c + 0.5, r + 0.5)
-        profiles = cv2.remap(image, (grid[..., 0] - 0.5).astype(np.float32),
-                             (grid[..., 1] - 0.5).astype(np.float32), cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_REPLICATE)
-        dark = float(np.median(profiles[:, :3]))
-        bright = float(np.median(profiles[:, -3:]))
+        edges.append((a, along, normal, half, s, grid.shape[:2]))
+        maps.append(grid.reshape(-1, 2))
+    # one remap for the four edges; samples at array indices: the centre of pixel [r, c] is
+    # (c + 0.5, r + 0.5)
+    samples = np.concatenate(maps).astype(np.float32) - np.float32(0.5)
+    count = len(samples)
+    rows = -(-count // REMAP_COLUMNS)           # remap takes maps under 32767 a side
+    samples = np.concatenate([samples, np.zeros((rows * REMAP_COLUMNS - count, 2), np.float32)])
+    values = cv2.remap(image, samples[:, 0].reshape(rows, -1), samples[:, 1].reshape(rows, -1),
+                       cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1)[:count]
+    lines, start = [], 0
+    for a, along, normal, half, s, shape in edges:
+        profiles = values[start:start + shape[0] * shape[1]].reshape(shape)
+        start += shape[0] * shape[1]
+        dark = _median(profiles[:, :3])
+        bright = _median(profiles[:, -3:])
         if bright - dark < MIN_EDGE_CONTRAST:
             return None
         bright_part = np.clip((profiles - dark) / (bright - dark), 0.0, 1.0)
@@ -302,3 +313,11 @@ def _fit_edges(image, corners, cells):
         (n0, d0), (n1, d1) = lines[i - 1], lines[i]
         refined[i] = np.linalg.solve(np.array([n0, n1]), [d0, d1])
     return refined
+
+
+def _median(values):
+    """np.median of a small array, without its overhead: the mean of the middle two."""
+    flat = values.ravel()
+    k = flat.size // 2
+    part = np.partition(flat, (k - 1, k) if flat.size % 2 == 0 else k)
+    return float(part[k]) if flat.size % 2 else 0.5 * (float(part[k - 1]) + float(part[k]))
