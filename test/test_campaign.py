@@ -115,7 +115,8 @@ BAD_SPECS = [
      r"grid.pixel_noise\[1\]: must be a number >= 0, got -1.0"),
     ("base: paper_3dof.yaml\nduration: 1.0\ngrid: {set.controller_node.alpah: [1.0]}\n",
      r"grid.set.controller_node.alpah: controller_node.alpah is not a parameter of "
-     r"controller_node"),
+     r"controller_node \(did you mean alpha\? the parameters: "
+     r"visual_adaptive_servo/config/controller.py\)"),
     ("base: paper_3dof.yaml\nduration: 1.0\ngrid: {gain_scale.beta: [1.0]}\n",
      r"grid.gain_scale.beta: unknown factor"),
     ("base: paper_3dof.yaml\nduration: 1.0\ngrid: {gain_scale.alpha: [0.0]}\n",

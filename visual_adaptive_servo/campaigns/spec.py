@@ -67,6 +67,7 @@ duration: :attr:`Run.command` is the ``vas run`` command line that repeats it.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import itertools
 import json
@@ -106,6 +107,7 @@ FACTOR_HELP = ("set.<section.param>, scale.<section.param>, pixel_noise, camera_
                "duration")
 _PARAM_NAMES = {SIM_SECTION: {s.name for s in SIM_PARAMS},
                 CONTROLLER_SECTION: {s.name for s in CONTROLLER_PARAMS}}
+_PARAM_FILES = {SIM_SECTION: "sim.py", CONTROLLER_SECTION: "controller.py"}
 
 
 class SpecError(ConfigError):
@@ -301,7 +303,10 @@ def _target_param(target, path, where):
         _fail(path, where, f"expected {SIM_SECTION}.NAME or {CONTROLLER_SECTION}.NAME, "
                            f"got {target!r}")
     if name not in _PARAM_NAMES[section]:
-        _fail(path, where, f"{target} is not a parameter of {section} (see config.py)")
+        close = difflib.get_close_matches(name, _PARAM_NAMES[section], n=3)
+        hint = f"did you mean {', '.join(close)}? " if close else ""
+        _fail(path, where, f"{target} is not a parameter of {section} ({hint}the parameters: "
+                           f"visual_adaptive_servo/config/{_PARAM_FILES[section]})")
     return target
 
 
