@@ -316,7 +316,7 @@ def add_parser(subparsers):
     cmd = subparsers.add_parser("campaign", help="many randomized runs from a spec, on every "
                                 "core or on a Ray cluster; resumable")
     cmd.add_argument("--spec", required=True, help="campaign spec (YAML), e.g. "
-                     "config/campaigns/start_offsets.yaml")
+                     "config/campaigns/start_and_estimates.yaml")
     cmd.add_argument("--out", required=True, help="output folder; rerun the same command to "
                      "resume an interrupted campaign")
     cmd.add_argument("--workers", type=int, help="worker processes (default: every core); "
