@@ -177,9 +177,9 @@ class PictureSettings:
     the last whole picture rendered without the plate.  Inside the window the picture
     is the whole rendering's; outside it the arm and any occluder are as at the last
     whole picture (the surroundings do not move), and no old copy of the tag is left.
-    Only the window's pixels and those of the last picture's window get new noise (a
-    twelfth of the picture, a fortieth of the noise's cost); the rest keeps the last
-    picture's, as the scene there is the last whole picture's.
+    Only the box around the window and the last picture's window gets new noise (about
+    a tenth of the picture here); the rest keeps the last picture's, as the scene there
+    is the last whole picture's.
     """
 
     surroundings: bool = False
