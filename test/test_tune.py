@@ -278,6 +278,29 @@ def test_relative_file_names_are_repointed_to_the_tuning_folder(tmp_path, monkey
         == (open(PAPER, encoding="utf-8").read(), [])
 
 
+def test_the_verdict_states_the_held_out_ratio_and_says_when_the_tuned_gains_are_not_better():
+    from types import SimpleNamespace
+
+    from visual_adaptive_servo.campaigns.tune_report import _verdict
+
+    def figures(p90, diverged=0):
+        return {"runs": 50, "diverged": diverged, "p90_true_rms_px": p90,
+                "objective": score_of(p90, diverged)}
+
+    def score_of(p90, diverged):
+        return 1e9 * diverged / 50 + p90
+
+    best = SimpleNamespace(number=35, value=0.54)
+    better = _verdict({"tuned": figures(0.9558), "file": figures(1.01)}, best, {"alpha": 1.0})
+    assert better.startswith("The tuned gains (trial 35) are better")
+    assert "the tuned p90 is 0.95x the file's" in better
+    worse = _verdict({"tuned": figures(1.2), "file": figures(1.01)}, best, {"alpha": 1.0})
+    assert "are NOT better" in worse and "1.19x" in worse
+    # with a divergence the ratio of the others' errors says nothing: left out
+    diverged = _verdict({"tuned": figures(0.5), "file": figures(0.4, 2)}, best, {"alpha": 1.0})
+    assert "are better" in diverged and "x the file's" not in diverged
+
+
 # -- a tuning end to end ---------------------------------------------------------------
 
 def _settings(out, **kw):

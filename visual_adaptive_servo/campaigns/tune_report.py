@@ -204,6 +204,9 @@ def _verdict(held_out, best, values):
     figures = (f"held-out: tuned {tuned['diverged']} of {tuned['runs']} diverged, p90 true RMS "
                f"{_fmt(tuned['p90_true_rms_px'])} px; the file's {file['diverged']} of "
                f"{file['runs']} diverged, p90 {_fmt(file['p90_true_rms_px'])} px")
+    if not tuned["diverged"] and not file["diverged"] and file["p90_true_rms_px"] > 0.0:
+        ratio = tuned["p90_true_rms_px"] / file["p90_true_rms_px"]
+        figures += f"; the tuned p90 is {ratio:.2f}x the file's"
     which = f"The tuned gains (trial {best.number})"
     if tuned["objective"] < file["objective"]:
         return f"{which} are better on the held-out runs ({figures})."
