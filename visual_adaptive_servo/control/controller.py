@@ -819,9 +819,12 @@ class AdaptiveVisualTracker:
         if self.scale is not None:
             jq, z_dot, z = rate
             if x_hat is not None:
-                self.scale.record(t, (jq - x_hat * z_dot) / z)
+                # (jq - x_hat z_dot) / z on Python floats (the scale keeps lists; 2m <= 6)
+                self.scale.record(t, [(a - x * b) / c for a, x, b, c in zip(
+                    jq.tolist(), x_hat.tolist(), z_dot.tolist(), z.tolist())])
             s = self.scale.value
-            rate = (s * jq, s * z_dot, z)
+            if s != 1.0:
+                rate = (s * jq, s * z_dot, z)
         self.predictor.commit(t, x_hat, rate, stamp)
 
     @staticmethod

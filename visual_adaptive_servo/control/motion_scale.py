@@ -100,7 +100,7 @@ class MotionScale:
 
     def record(self, t, speed):
         """Extend the predicted path to joint time t; ``speed`` is the unscaled model rate at t."""
-        speed = np.asarray(speed, dtype=float).tolist()
+        speed = list(speed) if isinstance(speed, list) else np.asarray(speed, dtype=float).tolist()
         if self.times:
             h = t - self.times[-1]
             p = [a + h * b for a, b in zip(self.path[-1], self.speed[-1])]
