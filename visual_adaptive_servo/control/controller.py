@@ -111,9 +111,8 @@ class EstimatorState:
         rates that way (:meth:`AdaptiveVisualTracker._law`).
         """
         i, j, k = ends
-        state = cls(flat[:i], flat[i:j], flat[j:k], flat[k:])
-        object.__setattr__(state, "_flat", (flat, ends))
-        return state
+        return _frozen(cls, {"x_obs": flat[:i], "a_z_perp": flat[i:j], "a_z": flat[j:k],
+                             "a_d": flat[k:], "_flat": (flat, ends)})
 
     def advanced(self, rates, dt):
         """Forward-Euler step of every state by ``dt`` with ``rates`` (an EstimatorState)."""
@@ -443,14 +442,31 @@ def _flat_law_output(kernel, out, sigma_min, damped, active):
     The rates are one flat state (:meth:`EstimatorState.from_flat`), so the next
     sample's Euler step and this one's finiteness check are one numpy call each.
     """
-    tau, _, _, _, _, s, qr_dot, qr_ddot = kernel._slices
-    m2, n = 2 * kernel.m, kernel.n
-    return _frozen(LawOutput, {
-        "tau": out[tau], "rates": EstimatorState.from_flat(out[kernel.rates], kernel.state_ends),
-        "s": out[s], "qr_dot": out[qr_dot], "qr_ddot": out[qr_ddot],
-        "J_star": out[kernel._J_star].reshape(m2, n), "z_hat": out[kernel._z_hat],
-        "sigma_min": sigma_min, "damped": damped, "projection_active": active,
-        "model_rate": out[kernel._rate].reshape(3, m2)})
+    return _frozen(_FlatLawOutput, {
+        "tau": out[kernel._slices[0]],
+        "rates": EstimatorState.from_flat(out[kernel.rates], kernel.state_ends),
+        "z_hat": out[kernel._z_hat], "sigma_min": sigma_min, "damped": damped,
+        "projection_active": active, "model_rate": out[kernel._rate].reshape(3, 2 * kernel.m),
+        "_source": (kernel, out)})
+
+
+class _FlatLawOutput(LawOutput):
+    """A :class:`LawOutput` whose s, qr_dot, qr_ddot and J_star are made when first read.
+
+    :meth:`AdaptiveVisualTracker._sample` reads none of them; each is a view of
+    the kernel's output array (``_source``), as the other fields are.
+    """
+
+    def __getattr__(self, name):          # only for names not in the instance's dict
+        if name not in ("s", "qr_dot", "qr_ddot", "J_star"):
+            raise AttributeError(name)
+        kernel, out = self.__dict__["_source"]
+        if name == "J_star":
+            value = out[kernel._J_star].reshape(2 * kernel.m, kernel.n)
+        else:
+            value = out[kernel._slices[("s", "qr_dot", "qr_ddot").index(name) + 5]]
+        object.__setattr__(self, name, value)
+        return value
 
 
 def _frozen(cls, values):
