@@ -105,8 +105,8 @@ class EstimatorState:
         """The state whose fields are views of the one array ``flat`` (no copy).
 
         ``flat`` holds x_obs, a_z_perp, a_z, a_d end to end; ``ends`` is where the
-        first three end, (2m, 2m + p_perp, 2m + p_perp + p_z).  A state and rates
-        held so step and check in one numpy call each (:meth:`advanced`,
+        first three end, (2m, 2m + p_perp, 2m + p_perp + p_z).  States and rates
+        held this way step and check in one numpy call each (:meth:`advanced`,
         :meth:`is_finite`) instead of one per field; the compiled law writes its
         rates that way (:meth:`AdaptiveVisualTracker._law`).
         """
