@@ -42,6 +42,7 @@ Usage::
 
     python benchmarks/bench_controller.py [--config FILE] [--steps N] [--repeats R]
         [--backend both|compiled|numpy] [--set NODE.PARAM=VALUE ...] [--out FILE]
+        [--no-startup]
 
 Prints a markdown table and writes benchmarks/results/controller_step_<config>.json.
 """
@@ -225,6 +226,9 @@ def main(argv=None):
                         help="parameter override, as vas run --set (repeatable)")
     parser.add_argument("--out", help="JSON result file (default: results/"
                         "controller_step_<config name>.json)")
+    parser.add_argument("--no-startup", action="store_true",
+                        help="skip the start-up timing (two fresh processes, one compiling "
+                             "every kernel into an empty cache: ~30 s)")
     args = parser.parse_args(argv)
 
     backends = (["compiled", "numpy"] if args.backend == "both" else [args.backend])
@@ -246,7 +250,7 @@ def main(argv=None):
             "step": stats(step_ns), "step_with_frame": stats(frame_ns),
             "step_between_frames": stats(between_ns), "control_law": stats(law_ns),
             "kinematic_tensors": stats(time_tensors(model, samples, args.repeats))}
-    startup = time_startup() if "compiled" in backends else None
+    startup = time_startup() if "compiled" in backends and not args.no_startup else None
     result = {
         "config": os.path.relpath(os.path.abspath(args.config), os.path.join(HERE, os.pardir)),
         "overrides": args.set, "n": model.n, "m": model.m,

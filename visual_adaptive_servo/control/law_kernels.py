@@ -536,6 +536,10 @@ class CompiledLaw:
         self._size = ends[-1]
         self._slices = [slice(a, b) for a, b in zip([0] + ends[:7], ends[:8])]
         self._J_star = slice(ends[-4], ends[-3])
+        #: where the rates x_obs_dot, a_perp_dot, a_z_dot, a_d_dot lie in ``out``, end to end
+        self.rates = slice(ends[0], ends[4])
+        #: where x_obs_dot, a_perp_dot, a_z_dot end within ``rates`` (EstimatorState.from_flat)
+        self.state_ends = (m2, m2 + model.p_perp, m2 + model.p_perp + model.p_z)
         self._z_hat = slice(ends[-3], ends[-2])
         self._rate = slice(ends[-2], ends[-1])
         self._warm_up(model)
@@ -580,6 +584,21 @@ class CompiledLaw:
         (tau, x_obs_dot, a_perp_dot, a_z_dot, a_d_dot, s, qr_dot, qr_ddot, J_star, z_hat,
         model_rate, sigma_min, damped, projection_active): views of one new array.
         """
+        out, sigma_min, damped, active = self.evaluate(
+            gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection, min_singular_value,
+            tensors, integral, motion_scale)
+        m2 = 2 * self.m
+        return (*[out[s] for s in self._slices], out[self._J_star].reshape(m2, self.n),
+                out[self._z_hat], out[self._rate].reshape(3, m2), sigma_min, damped, active)
+
+    def evaluate(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
+                 min_singular_value, tensors, integral, motion_scale=None):
+        """(out, sigma_min, damped, projection_active): :func:`law`'s one output array.
+
+        ``out`` holds tau (n), x_obs_dot (2m), a_perp_dot, a_z_dot, a_d_dot, s, qr_dot,
+        qr_ddot (n each), J_star (2m x n), z_hat (m), model_rate (3 x 2m) end to end: the
+        four rates in the order of the state's fields (see ``rates``).
+        """
         kappa, e_int = integral if integral is not None else (0.0, self._zeros)
         scale, scale_dot = motion_scale if motion_scale is not None else (1.0, 0.0)
         if projection is not None and projection is not self._projection:
@@ -600,6 +619,4 @@ class CompiledLaw:
             *tensors, state.x_obs, state.a_z_perp, state.a_z, state.a_d, q, qd, x, xd, xd_dot,
             xd_ddot, e_int, float(scale), float(scale_dot), flat, self._bounds, scalars,
             projection is not None, *self.chain, out)
-        m2 = 2 * self.m
-        return (*[out[s] for s in self._slices], out[self._J_star].reshape(m2, self.n),
-                out[self._z_hat], out[self._rate].reshape(3, m2), sigma_min, damped, active)
+        return out, sigma_min, damped, active

@@ -78,10 +78,13 @@ class MotionScale:
     def reset(self):
         self.value = 1.0            # s
         self.target = 1.0           # the regression's value, once trusted
+        # per joint sample (lists of Python floats: 2m = 2 to 6 values, for which each numpy
+        # call costs more than its arithmetic; called at every joint sample and frame)
         self.times = []             # joint-sample times of the path
         self.path = []              # P at those times, (2m,) each
         self.speed = []             # the unscaled model rate there, (2m,) each
-        self.sums = None            # weighted sums (w, x, P, xP, PP) of the regression
+        self.weight = 0.0           # the frames' total weight w in the regression
+        self.sums = None            # weighted sums (x, P, xP, PP) of the regression, 4 x (2m,)
         self.t_frame = None         # capture time of the last frame in the sums
 
     @property
@@ -97,11 +100,12 @@ class MotionScale:
 
     def record(self, t, speed):
         """Extend the predicted path to joint time t; ``speed`` is the unscaled model rate at t."""
-        speed = np.asarray(speed, dtype=float)
+        speed = list(speed) if isinstance(speed, list) else np.asarray(speed, dtype=float).tolist()
         if self.times:
-            p = self.path[-1] + (t - self.times[-1]) * self.speed[-1]
+            h = t - self.times[-1]
+            p = [a + h * b for a, b in zip(self.path[-1], self.speed[-1])]
         else:
-            p = np.zeros_like(speed)
+            p = [0.0] * len(speed)
         self.times.append(t)
         self.path.append(p)
         self.speed.append(speed)
@@ -109,32 +113,49 @@ class MotionScale:
             trim_buffers(self.times, t, self.horizon, self.path, self.speed)
 
     def path_at(self, stamp):
-        """P at ``stamp`` (None before the first joint sample at or before it)."""
+        """P at ``stamp``, (2m,) (None before the first joint sample at or before it)."""
+        p = self._path_at(stamp)
+        return None if p is None else np.array(p)
+
+    def _path_at(self, stamp):
         i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1
         if i < 0:
             return None
-        return self.path[i] + (stamp - self.times[i]) * self.speed[i]
+        h = stamp - self.times[i]
+        return [a + h * b for a, b in zip(self.path[i], self.speed[i])]
 
     def frame(self, stamp, x):
         """Add the frame captured at ``stamp`` to the regression; the new target or None."""
-        p = self.path_at(stamp)
+        p = self._path_at(stamp)
         if p is None or (self.t_frame is not None and stamp <= self.t_frame):
             return None
-        x = np.asarray(x, dtype=float)
+        x = np.asarray(x, dtype=float).tolist()
+        # the same arithmetic, element by element, as the numpy expressions in the comments
         if self.sums is None:
-            self.sums = [0.0, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
-                         np.zeros_like(x)]
+            self.weight, decay = 0.0, 0.0
+            sx = sp = sxp = spp = [0.0] * len(x)
         else:
             decay = exp(-(stamp - self.t_frame) / self.window)
-            self.sums = [decay * v for v in self.sums]
+            sx, sp, sxp, spp = self.sums
         self.t_frame = stamp
-        w, sx, sp, sxp, spp = self.sums
-        self.sums = [w + 1.0, sx + x, sp + p, sxp + x * p, spp + p * p]
-        w, sx, sp, sxp, spp = self.sums
-        var_p = spp / w - (sp / w) ** 2
-        if not float(np.mean(var_p)) > max(self.min_motion ** 2, 1e-12):
+        w = self.weight = decay * self.weight + 1.0
+        sx = [decay * a + b for a, b in zip(sx, x)]                     # decay sx + x
+        sp = [decay * a + b for a, b in zip(sp, p)]                     # decay sp + p
+        sxp = [decay * a + b * c for a, b, c in zip(sxp, x, p)]         # decay sxp + x p
+        spp = [decay * a + b * b for a, b in zip(spp, p)]               # decay spp + p**2
+        self.sums = (sx, sp, sxp, spp)
+        var_p = [b / w - (a / w) * (a / w) for a, b in zip(sp, spp)]  # spp/w - (sp/w)**2
+        total = _numpy_sum(var_p)
+        if not total / len(var_p) > max(self.min_motion ** 2, 1e-12):   # np.mean(var_p)
             return None
-        cov = float(np.sum(sxp / w - sx * sp / w**2))
-        s = cov / float(np.sum(var_p))
+        cov = _numpy_sum([c / w - a * b / w**2 for a, b, c in zip(sx, sp, sxp)])
+        s = cov / total
         self.target = min(max(s, self.lower), self.upper)
         return self.target
+
+
+def _numpy_sum(values):
+    """np.sum of a list of floats, bit for bit: numpy adds fewer than 8 in order."""
+    if len(values) >= 8:
+        return float(np.sum(values))
+    return sum(values)
