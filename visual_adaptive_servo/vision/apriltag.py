@@ -21,12 +21,15 @@ definition); the pixel convention is that of :mod:`.detection`.
 
 Detection of one frame
 ----------------------
-1. OpenCV's ArUco detector with the AprilTag dictionary of ``family`` and the
-   AprilTag 2 quad detection (``CORNER_REFINE_APRILTAG``; quads found on the image
-   smoothed by sigma ``QUAD_SIGMA``: on a noisy picture the unsmoothed search costs
-   5-10 times as long and finds nothing more).  It searches a window around the
-   tag's last position first (``SEARCH_MARGIN``), the whole picture when the tag is
-   not found there.
+1. OpenCV's ArUco detector, decoding each candidate quad against the one code of
+   ``tag_id`` (a fifth of the time of the family's 587 codes; another id's quad is
+   rejected all the same, and only a miss of the whole picture decodes against the
+   family, to name the ids it holds).  Near the tag's last position (a window of
+   ``SEARCH_MARGIN``) first ArUco's contour quads, then, when they miss it (some tags
+   over ~150 px), the AprilTag 2 quad detection (``CORNER_REFINE_APRILTAG``; quads
+   found on the image smoothed by sigma ``QUAD_SIGMA``: on a noisy picture the
+   unsmoothed search costs 5-10 times as long and finds nothing more), which also
+   searches the whole picture when the tag is not found near its last position.
 2. The tag with ``tag_id`` must be found exactly once, with every corner at least
    ``BORDER_MARGIN`` px inside the picture; otherwise no pixels, and ``reason``
    says why (missing, with the ids that were found; ambiguous; cut by the border).
@@ -45,9 +48,10 @@ Detection of one frame
 4. The centre is where the refined square's diagonals cross (a homography keeps
    the crossing of the diagonals: it is the projection of the tag's centre).
 
-OpenCV's ArUco corners count pixel centres from (0, 0), the AprilTag 2 ones are
-in this package's continuous convention (top-left corner of the image at (0, 0),
-measured here: 0.43 px between the two), so the fit works in the latter.
+OpenCV's ArUco (contour) corners count pixel centres from (0, 0), the AprilTag 2
+ones are in this package's continuous convention (top-left corner of the image at
+(0, 0), measured here: 0.43 px between the two): the contour corners are shifted by
+half a pixel, and the fit works in the latter.
 """
 
 from __future__ import annotations
