@@ -365,7 +365,7 @@ class PictureMaker:
         self.samples = []
         windows = [window for _, window in shots]
         region = None
-        if self._last is not None and None not in windows:
+        if self._last is not None and None not in windows + self._last_windows:
             # only the windows' pixels changed since the last picture, and those of the last
             # picture's windows (where the plate was): the rest is the last picture's
             region = _bounding(windows + self._last_windows)
