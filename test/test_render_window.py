@@ -218,3 +218,34 @@ def test_noise_is_the_rounded_and_saturated_float32_formula():
         expected = np.clip(np.rint(picture.astype(np.float32) + noise * std[picture]), 0, 255)
         np.testing.assert_array_equal(noisy, expected.astype(np.uint8))
         assert 0 < np.count_nonzero(noisy == 0) and 0 < np.count_nonzero(noisy == 255)
+
+
+def test_a_window_after_a_whole_picture_without_the_plates_window_is_made_whole():
+    """The plate's outline unknown at a whole picture: the next window's picture is all new."""
+    fast = _simulator("sim_node.picture.whole_every=2", "sim_node.picture.read_noise=0.0",
+                      "sim_node.picture.shot_noise=0.0")
+    slow = _simulator("sim_node.picture.whole_every=1", "sim_node.picture.read_noise=0.0",
+                      "sim_node.picture.shot_noise=0.0")
+    try:
+        poses = _poses(fast.config.initial_positions, 2, 0.1)
+        outline = fast.pictures.tag_outline
+        fast.pictures.tag_outline = lambda: None          # e.g. the plate off the picture
+        fast.plant.reset(poses[0])
+        fast._render()
+        assert fast.pictures._last_windows == [None]
+        fast.pictures.tag_outline = outline
+        for sim in (fast, slow):
+            sim.plant.reset(poses[1])
+        picture, expected = fast._render(), slow._render()
+        assert fast.pictures.last_window is not None
+        # made from the window and the base, not from the last picture: where the plate was
+        # at the whole picture there is no tag left, the same pixels as every-picture-whole
+        # but for the arm outside the window (as of the whole picture)
+        c0, r0, c1, r1 = fast.pictures.last_window
+        same = np.all(picture[r0:r1, c0:c1] == expected[r0:r1, c0:c1], axis=2)
+        assert same.mean() >= SAME_PIXELS
+        found = load_scenario(CONFIG).detector.detector().detect(picture)
+        assert found.pixels is not None, found.reason
+    finally:
+        fast.close()
+        slow.close()
