@@ -75,6 +75,7 @@ from visual_adaptive_servo.config.ros2_control import (
 )
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
+from visual_adaptive_servo.ros.launch_args import rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -103,16 +104,6 @@ def _unspawn(event, context):
     return [TimerAction(period=UNSPAWN_DELAY, actions=[OpaqueFunction(function=unspawn)])]
 
 
-def _rates(context):
-    """controller_node's ``publish_rate`` and ``diagnostics_rate`` given as launch arguments.
-
-    YAML-parsed (``100`` is a number), checked by the node.
-    """
-    given = {name: LaunchConfiguration(name).perform(context)
-             for name in ("publish_rate", "diagnostics_rate")}
-    return {name: yaml.safe_load(text) for name, text in given.items() if text}
-
-
 def _nodes(context):
     params_file = LaunchConfiguration("params_file").perform(context)
     controllers_file = LaunchConfiguration("controllers_file").perform(context)
@@ -136,7 +127,7 @@ def _nodes(context):
                            output="screen", parameters=[params_file, {
                                "timing_mode": "realtime", "use_sim_time": True,
                                "ros2_control.effort_controller": EFFORT_CONTROLLER,
-                               **_rates(context)}])
+                               **rates(context)}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
                         "start.wait_for_recorder": record})])
@@ -187,11 +178,6 @@ def generate_launch_description():
                               description="Record the package and hardware topics (MCAP)"),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist)"),
-        DeclareLaunchArgument("publish_rate", default_value="",
-                              description="controller_node's rate [Hz] of its state topics "
-                                          "(empty: 100)"),
-        DeclareLaunchArgument("diagnostics_rate", default_value="",
-                              description="controller_node's rate [Hz] of /diagnostics, plus "
-                                          "one at each change of health level (empty: 1)"),
+        *rate_arguments(),
         OpaqueFunction(function=_nodes),
     ])

@@ -64,6 +64,7 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
+from visual_adaptive_servo.ros.launch_args import rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
 RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
@@ -77,16 +78,6 @@ def _file_camera_mode(params_file):
     return (section.get("ros__parameters") or {}).get("camera_mode", "points")
 
 
-def _rates(context):
-    """controller_node's ``publish_rate`` and ``diagnostics_rate`` given as launch arguments.
-
-    YAML-parsed (``100`` is a number), checked by the node.
-    """
-    given = {name: LaunchConfiguration(name).perform(context)
-             for name in ("publish_rate", "diagnostics_rate")}
-    return {name: yaml.safe_load(text) for name, text in given.items() if text}
-
-
 def _nodes(context):
     params_file = LaunchConfiguration("params_file").perform(context)
     timing_mode = LaunchConfiguration("timing_mode").perform(context)
@@ -96,7 +87,7 @@ def _nodes(context):
                    or _file_camera_mode(params_file))
     controller = {"timing_mode": timing_mode, "use_sim_time": True,
                   "publish_every_sample": record and timing_mode == "lockstep"}
-    controller.update(_rates(context))
+    controller.update(rates(context))
 
     nodes = [
         Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
@@ -155,13 +146,7 @@ def generate_launch_description():
         DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
-        DeclareLaunchArgument("publish_rate", default_value="",
-                              description="controller_node's rate [Hz] of its state topics "
-                                          "(empty: 100; every sample with record:=true in "
-                                          "lockstep)"),
-        DeclareLaunchArgument("diagnostics_rate", default_value="",
-                              description="controller_node's rate [Hz] of /diagnostics, plus "
-                                          "one at each change of health level (empty: 1)"),
+        *rate_arguments("; every sample with record:=true in lockstep"),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist); "
                                           "empty: rosbag2_<date> in the current folder"),

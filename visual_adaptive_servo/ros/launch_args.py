@@ -1,0 +1,45 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Launch arguments for controller_node shared by servo.launch.py and ros2_control.launch.py.
+
+``publish_rate`` and ``diagnostics_rate``: empty leaves the node's own default.
+"""
+
+import yaml
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+
+RATE_ARGUMENTS = ("publish_rate", "diagnostics_rate")
+
+
+def rate_arguments(publish_note=""):
+    """The two DeclareLaunchArgument; ``publish_note`` ends publish_rate's "(empty: 100...)"."""
+    return [
+        DeclareLaunchArgument("publish_rate", default_value="",
+                              description="controller_node's rate [Hz] of its state topics "
+                                          f"(empty: 100{publish_note})"),
+        DeclareLaunchArgument("diagnostics_rate", default_value="",
+                              description="controller_node's rate [Hz] of /diagnostics, plus "
+                                          "one at each change of health level (empty: 1)"),
+    ]
+
+
+def rates(context):
+    """controller_node's ``publish_rate`` and ``diagnostics_rate`` given as launch arguments.
+
+    YAML-parsed (``100`` is a number), checked by the node.
+    """
+    given = {name: LaunchConfiguration(name).perform(context) for name in RATE_ARGUMENTS}
+    return {name: yaml.safe_load(text) for name, text in given.items() if text}
