@@ -75,7 +75,8 @@ from visual_adaptive_servo.config.ros2_control import (
 )
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
-from visual_adaptive_servo.ros.launch_args import rate_arguments, rates
+from visual_adaptive_servo.ros.launch_args import executor, executor_argument, \
+    rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -127,13 +128,14 @@ def _nodes(context):
                            output="screen", parameters=[params_file, {
                                "timing_mode": "realtime", "use_sim_time": True,
                                "ros2_control.effort_controller": EFFORT_CONTROLLER,
-                               **rates(context)}])
+                               **rates(context), **executor(context)}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
-                        "start.wait_for_recorder": record})])
+                        "start.wait_for_recorder": record}, **executor(context))])
     nodes = [
         Node(package=PACKAGE, executable="robot_description", name="robot_description",
-             output="screen", parameters=[{"robot_description": description}]),
+             output="screen", parameters=[{"robot_description": description,
+                                           **executor(context)}]),
         Node(package="controller_manager", executable="ros2_control_node",
              name="controller_manager", output="screen",
              parameters=[handle.name, {"use_sim_time": True}]),
@@ -179,5 +181,6 @@ def generate_launch_description():
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist)"),
         *rate_arguments(),
+        executor_argument(),
         OpaqueFunction(function=_nodes),
     ])

@@ -64,7 +64,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
-from visual_adaptive_servo.ros.launch_args import rate_arguments, rates
+from visual_adaptive_servo.ros.launch_args import executor, executor_argument, \
+    rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
 RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
@@ -88,12 +89,14 @@ def _nodes(context):
     controller = {"timing_mode": timing_mode, "use_sim_time": True,
                   "publish_every_sample": record and timing_mode == "lockstep"}
     controller.update(rates(context))
+    controller.update(executor(context))
 
     nodes = [
         Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
              parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
                                        "render.enabled": render,
-                                       "start.wait_for_recorder": record}]),
+                                       "start.wait_for_recorder": record,
+                                       **executor(context)}]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
              parameters=[params_file, controller]),
@@ -101,7 +104,8 @@ def _nodes(context):
     if camera_mode == "rendered":
         nodes.append(Node(package=PACKAGE, executable="feature_detector",
                           name="feature_detector", output="screen",
-                          parameters=[params_file, {"timing_mode": timing_mode}]))
+                          parameters=[params_file, {"timing_mode": timing_mode,
+                                                    **executor(context)}]))
     actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
                            f"{camera_mode}")]
     for node in nodes:
@@ -147,6 +151,7 @@ def generate_launch_description():
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
         *rate_arguments("; every sample with record:=true in lockstep"),
+        executor_argument(),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist); "
                                           "empty: rosbag2_<date> in the current folder"),

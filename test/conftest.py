@@ -150,11 +150,12 @@ def bag_counts(path):
 def spin_until(context, nodes, until, timeout):
     """Spin ``nodes`` in one executor of ``context`` until ``until()`` or ``timeout`` [s].
 
-    For the rclpy tests (they import rclpy first, skipping without ROS).
+    For the rclpy tests (they import rclpy first, skipping without ROS); the nodes'
+    own executor (ros/executor.py), as ``ros2 run`` spins them.
     """
-    from rclpy.executors import SingleThreadedExecutor
+    from visual_adaptive_servo.ros.executor import KeptWaitSetExecutor
 
-    executor = SingleThreadedExecutor(context=context)
+    executor = KeptWaitSetExecutor(context=context)
     for node in nodes:
         executor.add_node(node)
     deadline = time.monotonic() + timeout

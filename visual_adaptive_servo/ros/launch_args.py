@@ -14,7 +14,8 @@
 
 """Launch arguments for controller_node shared by servo.launch.py and ros2_control.launch.py.
 
-``publish_rate`` and ``diagnostics_rate``: empty leaves the node's own default.
+``publish_rate`` and ``diagnostics_rate``: empty leaves the node's own default;
+``executor``: the package's nodes' executor (ros/main.py), for every node of ours.
 """
 
 import yaml
@@ -34,6 +35,20 @@ def rate_arguments(publish_note=""):
                               description="controller_node's rate [Hz] of /diagnostics, plus "
                                           "one at each change of health level (empty: 1)"),
     ]
+
+
+def executor_argument():
+    """DeclareLaunchArgument ``executor``, the choice of :data:`..ros.main.EXECUTORS`."""
+    return DeclareLaunchArgument(
+        "executor", default_value="kept_wait_set", choices=["kept_wait_set", "rclpy"],
+        description="Executor of the package's nodes: kept_wait_set (one kept wait set, "
+                    "callbacks called directly: a third to half of rclpy's CPU per "
+                    "callback) or rclpy (rclpy's SingleThreadedExecutor)")
+
+
+def executor(context):
+    """{"executor": the launch argument}, a parameter for each of the package's nodes."""
+    return {"executor": LaunchConfiguration("executor").perform(context)}
 
 
 def rates(context):
