@@ -47,9 +47,9 @@ QoS: the commands are published reliable (depth 10).  With
 ``timing_mode: lockstep`` every subscription is reliable (depth 10): the
 simulator waits for each command, so nothing may be lost.  With
 ``timing_mode: realtime`` the measurements are sensor data (best effort,
-depth 5): a late sample is worth less than the next one.  ``timing_mode`` must
-match the publisher's: a reliable subscription does not match a best-effort
-publisher.
+depth 5; its joint-state subscription depth 1): a late sample is worth less than
+the next one.  ``timing_mode`` must match the publisher's: a reliable
+subscription does not match a best-effort publisher.
 
 Behind ros2_control (README "On a real arm"): the effort controller (a
 JointGroupEffortController) sends on whatever it last received, also after this
@@ -80,7 +80,8 @@ lockstep) every sample's state topics go out and /diagnostics as ``vas run``
 records them (at ``diagnostics_rate`` and on every change of the sample's
 status), so the bag holds every period and equals ``vas run``'s.
 
-How the callbacks run: one SingleThreadedExecutor (:mod:`.main`), one
+How the callbacks run: one single-threaded executor (:mod:`.main`: the package's
+:class:`~.executor.KeptWaitSetExecutor`, or rclpy's with ``executor:=rclpy``), one
 (default, mutually exclusive) callback group, no timer for the rates.  rclpy's
 executors are Python: a MultiThreadedExecutor hands each callback to a thread
 pool under the GIL (no parallel Python, more overhead per callback, and with
@@ -90,7 +91,9 @@ state topics are published in the joint-state callback after the commands:
 ``Publisher.publish`` converts the message and hands it to the middleware
 before it returns, so the commands are on their way before the first state
 message is built, and the next joint state waits in its queue only for the
-samples that publish (every 10th at 1 kHz).
+samples that publish (every 10th at 1 kHz).  In realtime the joint-state
+subscription keeps only the newest state (depth 1): a sample that comes late
+answers the newest state instead of working through a queue of older ones.
 
 Runtime parameters (``runtime`` in the schema: gains K and Gamma_*, torque
 limit, damping and safety settings) can be changed with ``ros2 param set``;
@@ -119,6 +122,12 @@ from .main import run_node
 from .params import declare_node_parameter, declare_rate, declare_schema, runtime_changes
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+# realtime joint states: sensor data keeping only the newest, so a late sample answers the
+# newest state and never works through a queue of old ones (which delayed every command by
+# 4-6 periods at 1 kHz with depth 5)
+LATEST_SENSOR_DATA = QoSProfile(depth=1, reliability=qos_profile_sensor_data.reliability,
+                                durability=qos_profile_sensor_data.durability,
+                                history=qos_profile_sensor_data.history)
 PUBLISH_RATE = 100.0       # Hz of sim time: default rate of the state topics
 DIAGNOSTICS_RATE = 1.0     # Hz of sim time: default rate of /diagnostics when nothing changes
 MAX_PENDING_FRAMES = 100   # frames kept while waiting for a joint state (more: superseded)
@@ -206,7 +215,7 @@ class ControllerNode(Node):
         self.create_subscription(msgs.PolygonStamped, "/camera/features", self._on_features,
                                  measurement_qos)
         self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
-                                 measurement_qos)
+                                 RELIABLE if lockstep else LATEST_SENSOR_DATA)
         self.effort_controller = self.declare_parameter("ros2_control.effort_controller",
                                                         "").value
         manager = self.declare_parameter("ros2_control.controller_manager",
