@@ -218,3 +218,26 @@ def test_an_unknown_executor_is_refused_by_name():
     finally:
         made.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+def test_the_fast_nodes_publishers_keep_the_incompatible_qos_warning(setup):
+    from visual_adaptive_servo.ros.executor import incompatible_qos_warning
+
+    _, executor, node = setup
+    sender = node("sender")
+    warnings = []
+
+    class Logger:
+        def warning(self, text):
+            warnings.append(text)
+
+    sender.get_logger = Logger
+    best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    pub = sender.create_publisher(Int64, "~/state", best_effort,
+                                  event_callbacks=incompatible_qos_warning(sender, "~/state"))
+    assert len(pub.event_handlers) == 1       # rclpy's default: two (QoS and type)
+    node("receiver").create_subscription(Int64, "/sender/state", lambda msg: None, RELIABLE)
+    assert spin(executor, lambda: warnings)
+    assert warnings[0].startswith("New subscription discovered on topic '/sender/state', "
+                                  "requesting incompatible QoS")
+    assert warnings[0].endswith("Last incompatible policy: RELIABILITY")

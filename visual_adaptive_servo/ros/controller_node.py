@@ -118,6 +118,7 @@ from ..control.controller import AdaptiveVisualTracker, frame_values, health
 from ..recording import messages as m
 from ..recording.cadence import RateGate
 from ..schema import CONTROLLER_SECTION, ConfigError
+from .executor import incompatible_qos_warning
 from .main import run_node
 from .params import declare_node_parameter, declare_rate, declare_schema, runtime_changes
 
@@ -197,7 +198,8 @@ class ControllerNode(Node):
         measurement_qos = RELIABLE if lockstep else qos_profile_sensor_data
         msgs = self.msgs
         self.publishers_by_topic = {
-            topic: self.create_publisher(getattr(msgs, kind), topic, RELIABLE)
+            topic: self.create_publisher(getattr(msgs, kind), topic, RELIABLE,
+                                         event_callbacks=incompatible_qos_warning(self, topic))
             for topic, kind in (("/effort_controller/commands", "Float64MultiArray"),
                                 ("~/desired", "PolygonStamped"),
                                 ("~/observed", "PolygonStamped"),
@@ -205,8 +207,9 @@ class ControllerNode(Node):
                                 ("~/estimated_depth", "Float64MultiArray"),
                                 ("~/parameters", "Float64MultiArray"),
                                 ("~/effort_command", "JointState"))}
-        self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
-                                                     RELIABLE)
+        self.diagnostics_pub = self.create_publisher(
+            msgs.DiagnosticArray, "/diagnostics", RELIABLE,
+            event_callbacks=incompatible_qos_warning(self, "/diagnostics"))
         self.command_pub = self.publishers_by_topic["/effort_controller/commands"]
         self.stamped_command_pub = self.publishers_by_topic["~/effort_command"]
         self.lockstep = lockstep

@@ -135,6 +135,7 @@ from ..recording import messages as m
 from ..recording.recorder import TOPICS
 from ..schema import ConfigError, SIM_SECTION
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
+from .executor import incompatible_qos_warning
 from .main import run_node
 from .params import declare_schema
 
@@ -170,7 +171,8 @@ class SimNode(Node):
         camera_topics = ((("/camera/image_raw", "Image"), ("/camera/camera_info", "CameraInfo"))
                          if self.rendered else ((FEATURES_TOPIC, "PolygonStamped"),))
         self.publishers_by_topic = {
-            topic: self.create_publisher(getattr(msgs, kind), topic, qos)
+            topic: self.create_publisher(getattr(msgs, kind), topic, qos,
+                                         event_callbacks=incompatible_qos_warning(self, topic))
             for topic, kind, qos in (
                 *((topic, kind, measurement_qos) for topic, kind in camera_topics),
                 ("/clock", "Clock", RELIABLE),
@@ -178,8 +180,9 @@ class SimNode(Node):
                 ("~/true_depth", "Float64MultiArray", RELIABLE))}
         # sim_outputs names the joint state /joint_states, wherever it is published
         self.publishers_by_topic["/joint_states"] = self.publishers_by_topic.pop(self.state_topic)
-        self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
-                                                     RELIABLE)
+        self.diagnostics_pub = self.create_publisher(
+            msgs.DiagnosticArray, "/diagnostics", RELIABLE,
+            event_callbacks=incompatible_qos_warning(self, "/diagnostics"))
         if self.lockstep:
             self.command_sub = self.create_subscription(
                 msgs.JointState, STAMPED_COMMAND_TOPIC, self._on_stamped_command, RELIABLE)
