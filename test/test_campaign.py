@@ -476,3 +476,31 @@ def test_a_case_may_give_its_own_duration(tmp_path):
                     "cases:\n  - {name: bad, duration: 0}\n")
     with pytest.raises(SpecError, match="duration"):
         load_spec(str(spec))
+
+
+def test_a_diverged_run_says_why_in_its_row_and_in_the_summary(tmp_path):
+    # a divergence torque below the paper's start-up torque: the run diverges at once
+    spec = write_spec(str(tmp_path), f"""\
+        base: paper_3dof.yaml
+        duration: {SHORT}
+        cases:
+          - {{name: calm}}
+          - {{name: strict, set.controller_node.divergence_torque: 1.0}}
+        """)
+    run_campaign(spec, str(tmp_path / "out"), workers=1, progress=False)
+    rows = {r["factors"]["case"]: r for r in read_rows(str(tmp_path / "out" / CSV_NAME),
+                                                       load_spec(spec))}
+    assert (rows["calm"]["diverged"], rows["calm"]["reason"]) == (False, "")
+    strict = rows["strict"]
+    assert strict["status"] == "finished" and strict["diverged"]
+    assert re.match(r"\|tau\| = \S+ N m > divergence_torque 1 at t=\d", strict["reason"]), \
+        strict["reason"]
+    # what vas run says of the same run (it exits with 1: diverged)
+    words = shlex.split(strict["command"])
+    done = subprocess.run([sys.executable, "-m", "visual_adaptive_servo.cli"] + words[1:],
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 1, done.stderr
+    with open(tmp_path / f"vas-run-{strict['id']}" / "summary.json", encoding="utf-8") as handle:
+        assert json.load(handle)["divergence_reason"] == strict["reason"]
+    summary = (tmp_path / "out" / "summary.md").read_text(encoding="utf-8")
+    assert f"| yes: {strict['reason'].replace('|', '/')} |" in summary

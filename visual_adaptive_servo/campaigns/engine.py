@@ -60,6 +60,8 @@ FIGURES = ("diverged", "final_rms_error_px", "final_rms_true_error_px", "max_err
            "transient_rms_true_error_px", "transient_max_true_error_px", "torque_rms",
            "torque_rate_rms")
 MAX_ATTEMPTS = 2
+#: the key of a run's figures that says why it diverged (not a figure: the row's reason)
+DIVERGENCE_REASON = "divergence_reason"
 RAY_MISSING = ("--ray needs Ray, an optional extra: pip install 'visual_adaptive_servo[ray]' "
                "(or pip install ray)")
 
@@ -74,7 +76,10 @@ class RunFailed(Exception):
 
 @dataclass(frozen=True)
 class RunResult:
-    """How one run ended: ``status`` is ``finished`` or ``failed`` (then ``reason``)."""
+    """How one run ended: ``status`` is ``finished`` or ``failed``.
+
+    ``reason`` says why it failed, or why a finished run diverged (else it is empty).
+    """
 
     run: object
     status: str
@@ -90,7 +95,9 @@ def execute_run(run, keep_dir=None, figures=FIGURES):
     ``keep_dir``: keep each run's timeseries.csv and summary.json in
     ``keep_dir/<run index>`` (``vas compare`` plots from them); by default they go to
     a scratch folder.  ``figures``: the summary.json keys to return (``vas tune`` also
-    reads the count of saturated samples).
+    reads the count of saturated samples).  A run that diverged also returns why
+    (``DIVERGENCE_REASON``: what crossed its limit and what grew first), which
+    runs.csv keeps in its ``reason`` column.
     """
     from ..config.scenario import load_scenario
     from ..control.registry import controller_factory
@@ -105,7 +112,10 @@ def execute_run(run, keep_dir=None, figures=FIGURES):
                                record=False, plots=False, controller_factory=factory)
     if summary.get("error"):
         raise RunFailed(summary["error"])
-    return {key: summary.get(key, math.nan) for key in figures}
+    out = {key: summary.get(key, math.nan) for key in figures}
+    if summary.get("diverged"):
+        out[DIVERGENCE_REASON] = summary.get("divergence_reason", "")
+    return out
 
 
 def describe(exc):
@@ -144,7 +154,8 @@ class _Attempts:
 
     def ended(self, run, kind, payload, wall):
         if kind == "done":
-            self.on_result(RunResult(run, "finished", payload, "", self.count(run), wall))
+            reason = payload.pop(DIVERGENCE_REASON, "") if isinstance(payload, dict) else ""
+            self.on_result(RunResult(run, "finished", payload, reason, self.count(run), wall))
         else:
             self.on_result(RunResult(run, "failed", {}, payload, self.count(run), wall))
 

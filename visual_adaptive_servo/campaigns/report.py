@@ -109,6 +109,7 @@ def summarize(rows, level_factors, total_runs, interrupted=False):
         "quantiles": {key: quantiles([r[key] for r in calm]) for key, _ in QUANTILE_FIGURES},
         "by_factor": by_factor,
         "worst": [{"id": r["id"], "factors": r["factors"], "diverged": r["diverged"],
+                   "reason": r.get("reason", "") if r["diverged"] else "",
                    "final_rms_true_error_px": r["final_rms_true_error_px"],
                    "max_true_error_px": r["max_true_error_px"],
                    "max_abs_torque": r["max_abs_torque"], "command": r["command"]}
@@ -162,7 +163,7 @@ def markdown(summary, title, plots):
               "| max abs(tau) [N m] |", "|---:|---|---|---:|---:|---:|"]
     for r in summary["worst"]:
         lines.append(f"| {r['id']} | {_factors_text(r['factors'])} "
-                     f"| {'yes' if r['diverged'] else 'no'} "
+                     f"| {_diverged_text(r)} "
                      f"| {_fmt(r['final_rms_true_error_px'])} | {_fmt(r['max_true_error_px'])} "
                      f"| {_fmt(r['max_abs_torque'])} |")
     lines += ["", "Reproduce one:", ""]
@@ -175,6 +176,14 @@ def markdown(summary, title, plots):
     if plots:
         lines += ["", "## Plots", ""] + [f"![{os.path.splitext(p)[0]}]({p})" for p in plots]
     return "\n".join(lines) + "\n"
+
+
+def _diverged_text(row):
+    """'no', or 'yes' with why (the run's reason: what crossed its limit, what grew first)."""
+    if not row["diverged"]:
+        return "no"
+    reason = row.get("reason", "")
+    return f"yes: {reason.replace('|', '/')}" if reason else "yes"
 
 
 def plot_file_name(factor):
