@@ -21,7 +21,8 @@
 
 Per bag (read with rosbags, no ROS needed):
 
-* tracking: RMS and max over t >= 5 s and over the last 5 s of max_i |x_i - x_d,i|
+* tracking: RMS and max over t >= 5 s (null for a shorter run) and over the last 5 s of
+  max_i |x_i - x_d,i|
   (``/controller_node/tracking_error``), max |tau|;
 * periods: the simulator's joint states (``/sim_node/joint_states`` through
   ros2_control, else ``/joint_states``) carry the torque applied over the period
@@ -138,8 +139,10 @@ def analyse(bag, period):
             for _, m in topics["/controller_node/effort_command"]]
     return {
         "bag": bag, "through_ros2_control": through_ros2_control,
-        "tracking_px": {"rms_after_5s": float(np.sqrt(np.mean(err[late] ** 2))),
-                        "max_after_5s": float(err[late].max()),
+        # a run shorter than the transient has nothing after it: null, not a crash
+        "tracking_px": {"rms_after_5s": (float(np.sqrt(np.mean(err[late] ** 2)))
+                                         if late.any() else None),
+                        "max_after_5s": float(err[late].max()) if late.any() else None,
                         "rms_last_5s": float(np.sqrt(np.mean(err[last] ** 2))),
                         "max": float(err.max()), "samples": int(err.size),
                         "duration_s": float(t[-1])},
