@@ -32,6 +32,7 @@ rclpy = pytest.importorskip("rclpy", reason="needs a sourced ROS 2 Jazzy (rclpy)
 
 from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup  # noqa: E402
 from rclpy.event_handler import SubscriptionEventCallbacks  # noqa: E402
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: E402
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: E402
@@ -241,3 +242,31 @@ def test_the_fast_nodes_publishers_keep_the_incompatible_qos_warning(setup):
     assert warnings[0].startswith("New subscription discovered on topic '/sender/state', "
                                   "requesting incompatible QoS")
     assert warnings[0].endswith("Last incompatible policy: RELIABILITY")
+
+
+def test_an_async_callback_awaiting_a_service_on_the_same_executor_completes(setup):
+    # the task waits for a future only a later wake-up (the response) completes: the
+    # executor must keep waiting on its entities while the task is pending
+    _, executor, node = setup
+    server = node("server")
+    server.declare_parameter("gain", 1.0)
+    caller = node("caller")
+    # its own callback group: in the subscription's, rclpy would wait for the callback
+    # to end before taking the response the callback awaits
+    client = caller.create_client(SetParameters, "/server/set_parameters",
+                                  callback_group=MutuallyExclusiveCallbackGroup())
+    assert spin(executor, client.service_is_ready)
+    results = []
+
+    async def on_message(msg):
+        request = SetParameters.Request(parameters=[
+            Parameter("gain", value=float(msg.data)).to_parameter_msg()])
+        response = await client.call_async(request)
+        results.append(response.results[0].successful)
+
+    caller.create_subscription(Int64, "/set", on_message, RELIABLE)
+    pub = node("sender").create_publisher(Int64, "/set", RELIABLE)
+    assert spin(executor, lambda: pub.get_subscription_count() == 1)
+    pub.publish(Int64(data=4))
+    assert spin(executor, lambda: results == [True], timeout=5.0)
+    assert server.get_parameter("gain").value == 4.0
