@@ -16,8 +16,9 @@
 
 Needs a sourced ROS 2 Jazzy (skipped otherwise).  Each test runs in its own
 rclpy context on a private ROS domain, with the node and a probe node in one
-SingleThreadedExecutor.  Oracle: the exact centroids of the supersampled discs
-of conftest.draw_discs, and the stamp of the image that was published.
+executor (the nodes' own, conftest.spin_until).  Oracle: the exact centroids of
+the supersampled discs of conftest.draw_discs, and the stamp of the image that
+was published.
 """
 
 import os

@@ -15,8 +15,8 @@
 """The two ROS 2 nodes closing the loop through real rclpy topics.
 
 Needs a sourced ROS 2 Jazzy (skipped otherwise).  Each test runs in its own
-rclpy context on a private ROS domain, with the nodes in one
-SingleThreadedExecutor.  The oracle for the lockstep loop is the in-process
+rclpy context on a private ROS domain, with the nodes in one executor (the
+nodes' own, conftest.spin_until).  The oracle for the lockstep loop is the in-process
 runner: both step the same simulator and controller in the same order and
 ``vas run`` reads pixels and times as the messages carry them (float32,
 integer nanoseconds), so the tracking error through ROS must equal the one
