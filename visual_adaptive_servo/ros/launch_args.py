@@ -42,7 +42,7 @@ def executor_argument():
     return DeclareLaunchArgument(
         "executor", default_value="kept_wait_set", choices=["kept_wait_set", "rclpy"],
         description="Executor of the package's nodes: kept_wait_set (one kept wait set, "
-                    "callbacks called directly: a third to half of rclpy's CPU per "
+                    "callbacks called directly: less than half of rclpy's CPU per "
                     "callback) or rclpy (rclpy's SingleThreadedExecutor)")
 
 

@@ -35,8 +35,8 @@ callback.
 
 The executor: :class:`~.executor.KeptWaitSetExecutor` (the node parameter
 ``executor``, read-only, default ``kept_wait_set``), which does rclpy's
-single-threaded work at a third to half of its CPU per callback, or ``rclpy``:
-rclpy's own ``SingleThreadedExecutor``.
+single-threaded work at less than half its CPU per callback (0.45x,
+benchmarks/bench_executor.py), or ``rclpy``: rclpy's own ``SingleThreadedExecutor``.
 """
 
 from __future__ import annotations
