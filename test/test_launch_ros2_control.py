@@ -40,7 +40,7 @@ from ament_index_python.packages import (
     PackageNotFoundError,
     get_package_share_directory,
 )
-from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
+from launch.actions import ExecuteProcess, IncludeLaunchDescription, SetEnvironmentVariable
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 
 from launch import LaunchDescription
@@ -84,7 +84,11 @@ def _short_params_file():
 @pytest.mark.launch_test
 def generate_test_description():
     if MISSING:
-        return LaunchDescription([launch_testing.actions.ReadyToTest()])
+        # a process for the launch to wait on: a description without one ends before the
+        # (skipped) tests run, and launch_testing fails them ("Launch stopped before the
+        # active tests finished")
+        return LaunchDescription([ExecuteProcess(cmd=["sleep", "60"]),
+                                  launch_testing.actions.ReadyToTest()])
     return LaunchDescription([
         SetEnvironmentVariable("ROS_DOMAIN_ID", str(200 + os.getpid() % 30)),
         IncludeLaunchDescription(

@@ -229,6 +229,7 @@ def test_the_fast_nodes_publishers_keep_the_incompatible_qos_warning(setup):
     warnings = []
 
     class Logger:
+
         def warning(self, text):
             warnings.append(text)
 
