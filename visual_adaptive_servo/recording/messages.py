@@ -154,7 +154,8 @@ def rclpy_messages():
         classes[short] = getattr(importlib.import_module(f"{package}.msg"), name)
     # uint8[] as array.array('B') and float64[] as array.array('d'): the generated setter
     # stores them as they are (0.06 ms for a 640x480 rgb8 image; bytes are converted, 1.15
-    # ms, and a list is checked element by element in Python: 10-20 us a JointState)
+    # ms, and a list is checked element by element in Python: a 7-joint JointState is built
+    # in 4.9 us instead of 6.9)
     return MessageSet(classes, lambda v: array.array("d", np.asarray(v, dtype=np.float64)
                                                      .reshape(-1).tobytes()),
                       lambda v: array.array("B", np.asarray(v, dtype=np.uint8).tobytes()),
