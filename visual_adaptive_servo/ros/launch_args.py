@@ -22,6 +22,8 @@ import yaml
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 
+from .main import DEFAULT_EXECUTOR, EXECUTOR_DESCRIPTION, EXECUTORS
+
 RATE_ARGUMENTS = ("publish_rate", "diagnostics_rate")
 
 
@@ -38,12 +40,10 @@ def rate_arguments(publish_note=""):
 
 
 def executor_argument():
-    """DeclareLaunchArgument ``executor``, the choice of :data:`..ros.main.EXECUTORS`."""
+    """DeclareLaunchArgument ``executor``, the choice of :data:`.main.EXECUTORS`."""
     return DeclareLaunchArgument(
-        "executor", default_value="kept_wait_set", choices=["kept_wait_set", "rclpy"],
-        description="Executor of the package's nodes: kept_wait_set (one kept wait set, "
-                    "callbacks called directly: less than half of rclpy's CPU per "
-                    "callback) or rclpy (rclpy's SingleThreadedExecutor)")
+        "executor", default_value=DEFAULT_EXECUTOR, choices=list(EXECUTORS),
+        description="Executor of the package's nodes: " + EXECUTOR_DESCRIPTION)
 
 
 def executor(context):
