@@ -43,10 +43,11 @@ from conftest import ROOT
 from test_compiled_tensors import reference_of
 from test_urdf_kinematics import SYNTHETIC
 from visual_adaptive_servo.config.scenario import load_scenario
-from visual_adaptive_servo.control.controller import (_law_output, AdaptiveVisualTracker,
-                                                      control_law, EstimatorState, Leakage,
-                                                      Projection)
+from visual_adaptive_servo.control.controller import (_flat_law_output, _law_output,
+                                                      AdaptiveVisualTracker, control_law,
+                                                      EstimatorState, Leakage, Projection)
 from visual_adaptive_servo.control.prediction import FramePredictor
+from visual_adaptive_servo.control.trajectory import BlendedStart
 from visual_adaptive_servo.models import PaperRRRCamera
 from visual_adaptive_servo.models.rigid_body import RigidBodyDynamics
 from visual_adaptive_servo.models.urdf_arm import UrdfArmCamera
@@ -54,7 +55,10 @@ from visual_adaptive_servo.runner import run_scenario
 
 pytest.importorskip("numba", reason="the compiled backend needs numba")
 
-from visual_adaptive_servo.control.prediction_kernels import rerun  # noqa: E402  (numba)
+from visual_adaptive_servo.control.law_kernels import CompiledLaw  # noqa: E402  (numba)
+from visual_adaptive_servo.control.prediction_kernels import (  # noqa: E402  (numba)
+    BufferedFramePredictor)
+from visual_adaptive_servo.control.sample_kernels import CompiledSample  # noqa: E402  (numba)
 from visual_adaptive_servo.models import dynamics_kernels  # noqa: E402  (needs numba)
 
 CONFIGS = ["paper_3dof.yaml", "paper_3dof_urdf.yaml", "iiwa_3points.yaml", "panda_2points.yaml"]
@@ -82,6 +86,8 @@ CASES = {
                      "controller_node.motion_scale.rate=20.0",
                      "controller_node.motion_scale.min_motion=0.0"] + LATE_CAMERA,
     "no_motion_scale": ["controller_node.motion_scale.enabled=false"],
+    # a start off the trajectory: x_d blended in from the measured point (BlendedStart)
+    "start_off": ["controller_node.start_blend_time=0.2"],   # and the start moved (scenario_for)
 }
 LAW_FIELDS = ("tau", "s", "qr_dot", "qr_ddot", "J_star", "z_hat")
 RATE_FIELDS = ("x_obs", "a_z_perp", "a_z", "a_d")
@@ -134,6 +140,11 @@ def scenario_for(name, case):
         config = config.with_changes(**changes)
     elif case == "damping":
         config = config.with_changes(**{"joint_damping.diagonal": [0.5] * config.model.n})
+    elif case == "start_off":
+        start = (np.asarray(scenario.sim["initial_positions"], dtype=float) + 0.03).tolist()
+        scenario = load_scenario(os.path.join(ROOT, "config", name),
+                                 CASES[case] + [f"sim_node.initial_positions={start}"])
+        config = scenario.controller
     return dataclasses.replace(scenario, controller=config)
 
 
@@ -163,58 +174,126 @@ def assert_step_equal(compiled, reference, where):
                      STEP_RTOL)
 
 
+def check_compiled_sample(tracker, reference_tensors, args, returned, where):
+    """One :func:`.sample_kernels.sample` call against the numpy reference of each of its steps.
+
+    From the kernel's inputs: the Euler step of the last sample's state and rates, the
+    projection's interior test and clamp (:class:`Projection`), x_d(t) (the tracker's
+    trajectory or start blend), the integral, then :func:`control_law` on those, and the
+    saturation.  Returns whether the projection was applied.
+    """
+    cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot = args
+    finite, sigma_min, damped, active, saturated = returned
+    fast, model = tracker._fast, tracker.model
+    state = EstimatorState.from_flat(prev[fast.state] + dt * prev[fast.rates], fast.state_ends)
+    tensors = reference_tensors(q, qd)
+    projection = tracker.projection
+    if projection is not None and not projection.interior(state, tensors[0]):
+        state = projection.clamp(state, tensors[0])
+    else:
+        projection = None
+    for name in RATE_FIELDS:
+        assert_close(res[fast.state][dict(zip(RATE_FIELDS, slices_of(fast)))[name]],
+                     getattr(state, name), f"{where}: state {name}")
+    xd = tracker.desired(t)
+    for k, name in enumerate(("x_d", "x_d_dot", "x_d_ddot")):
+        assert_close(res[fast.xd.start + k * fast.m2:fast.xd.stop + k * fast.m2], xd[k],
+                     f"{where}: {name}")
+    kappa = tracker.config["reference.integral_rate"] * tracker.gains.gamma ** 2
+    e_int = prev[fast.e_int]
+    if kappa > 0.0:
+        e_int = e_int + dt * (prev[fast.x_obs] - prev[fast.xd])
+    assert_close(res[fast.e_int], e_int, f"{where}: e_int")
+    motion = None if tracker.scale is None else (s, s_dot)
+    reference = reference_law(model, tracker.gains, state, q, qd, x, *xd, projection,
+                              tracker.config["min_singular_value"], tensors,
+                              (kappa, e_int) if kappa > 0.0 else None, motion)
+    assert finite, f"{where}: the kernel found the update not finite"
+    assert_law_equal(_flat_law_output(tracker._law_kernel, res[fast.out], sigma_min, damped,
+                                      active), reference, where)
+    limit = tracker.config["torque_limit"]
+    assert saturated == (not np.all(np.abs(reference.tau) <= limit)), f"{where}: saturated"
+    assert_close(res[fast.tau], np.clip(reference.tau, -limit, limit), f"{where}: tau")
+    assert_close(res[fast.error], x - xd[0], f"{where}: error")
+    return projection is not None
+
+
+def slices_of(fast):
+    """Slices of x_obs, a_z_perp, a_z, a_d within a state of ``fast``'s layout."""
+    i, j, k = fast.state_ends
+    return slice(0, i), slice(i, j), slice(j, k), slice(k, fast.ns)
+
+
 @pytest.mark.parametrize("case", list(CASES))
 @pytest.mark.parametrize("name", CONFIGS)
 def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
         name, case, tmp_path, monkeypatch):
-    # two checks at every sample of the run (the compiled tracker closes the loop): the
-    # compiled law against control_law at the same inputs, and the whole step (the flat
-    # state's Euler step, motion scale, projection, trajectory, saturation, prediction)
-    # against a numpy-backend tracker fed the same measurements
+    # two checks at every sample of the run (the compiled tracker closes the loop): each
+    # step of the compiled sample (or, at a restart, the compiled law) against its numpy
+    # reference at the same inputs, and the whole step (the flat state's Euler step, motion
+    # scale, projection, trajectory, saturation, prediction) against a numpy-backend tracker
+    # fed the same measurements
     scenario = scenario_for(name, case)
     model = scenario.controller.model
     assert model.backend == "compiled"
     shadow = AdaptiveVisualTracker(
         dataclasses.replace(scenario.controller, model=numpy_model(name)))
-    assert shadow._compiled_law() is None and shadow.predictor.rerun is None
+    assert shadow._compiled_law() is None
+    assert not isinstance(shadow.predictor, BufferedFramePredictor)
+    assert shadow._compiled_sample() is None
     reference_tensors = reference_of(model)
-    original = AdaptiveVisualTracker._law
     original_step = AdaptiveVisualTracker.step
-    seen = {"samples": 0, "projected": 0, "clamped": 0, "damped_D": 0, "integral": 0,
-            "scaled": 0, "steps": 0}
+    original_evaluate = CompiledLaw.evaluate
+    original_kernel = CompiledSample.kernel
+    seen = {"samples": 0, "compiled_samples": 0, "projected": 0, "clamped": 0, "damped_D": 0,
+            "integral": 0, "scaled": 0, "steps": 0, "blended": 0, "tracker": None}
 
     def stepped(self, t, q, qd, x=None, x_stamp=None):
+        if self is not shadow:
+            seen["tracker"] = self
         result = original_step(self, t, q, qd, x, x_stamp)
         if self is not shadow:
+            assert self._compiled_sample() is not None, "the tracker runs no compiled sample"
             reference = original_step(shadow, t, q, qd, x, x_stamp)
             assert_step_equal(result, reference, f"{name} {case} step at t={t:.4f}")
             seen["steps"] += 1
         return result
 
-    def checked(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection,
-                e_int=None):
-        if self is shadow:
-            return original(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection,
-                            e_int)
-        assert self._compiled_law() is not None, "the tracker runs the numpy law"
-        out = original(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int)
-        kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
-        motion = None if self.scale is None else (self.scale.value, self.scale.derivative)
-        reference = reference_law(model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                                  projection, self.config["min_singular_value"],
-                                  reference_tensors(q, qd),
-                                  (kappa, e_int) if kappa > 0.0 else None, motion)
-        assert_law_equal(out, reference, f"{name} {case} t={t:.4f}")
+    def count(tracker, projected, motion):
         seen["samples"] += 1
-        seen["projected"] += out.projection_active
-        seen["clamped"] += projection is not None
-        seen["damped_D"] += self.gains.D is not None
-        seen["integral"] += kappa > 0.0
+        seen["projected"] += projected
+        seen["damped_D"] += tracker.gains.D is not None
+        seen["integral"] += tracker.config["reference.integral_rate"] > 0.0
         seen["scaled"] += motion is not None and motion != (1.0, 0.0)
-        return out
+        seen["blended"] += isinstance(tracker.desired, BlendedStart)
 
-    monkeypatch.setattr(AdaptiveVisualTracker, "_law", checked)
+    def kernel(*args):
+        returned = original_kernel(*args)
+        tracker = seen["tracker"]
+        t = args[8]
+        clamped = check_compiled_sample(tracker, reference_tensors, args, returned,
+                                        f"{name} {case} compiled sample t={t:.4f}")
+        seen["compiled_samples"] += 1
+        seen["clamped"] += clamped
+        count(tracker, returned[3], None if tracker.scale is None else args[10:12])
+        return returned
+
+    def evaluated(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
+                  min_singular_value, tensors, integral, motion_scale=None):
+        # the compiled law of the samples that are not compiled whole (a restart)
+        raw = original_evaluate(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
+                                min_singular_value, tensors, integral, motion_scale)
+        reference = reference_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot,
+                                  projection, min_singular_value, reference_tensors(q, qd),
+                                  integral, motion_scale)
+        assert_law_equal(_flat_law_output(self, *raw), reference, f"{name} {case} law")
+        seen["clamped"] += projection is not None
+        count(seen["tracker"], raw[3], motion_scale)
+        return raw
+
     monkeypatch.setattr(AdaptiveVisualTracker, "step", stepped)
+    monkeypatch.setattr(CompiledLaw, "evaluate", evaluated)
+    monkeypatch.setattr(CompiledSample, "kernel", staticmethod(kernel))
     summary = run_scenario(scenario, str(tmp_path), DURATIONS[name], progress=False,
                            record=False, plots=False)
     # the runner reports an exception (a failed check above) as the run's error
@@ -222,9 +301,11 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
     assert not summary["diverged"]
     assert seen["steps"] == summary["steps"] == round(DURATIONS[name]
                                                       / scenario.sim.control_period)
-    # every accepted sample went through the law (the late camera's first 33 ms have none)
+    # every accepted sample went through the law (the late camera's first 33 ms have none),
+    # all but the first compiled whole
     accepted = summary["steps"] - summary["rejected"]
     assert seen["samples"] >= accepted >= 0.8 * summary["steps"]
+    assert seen["compiled_samples"] == seen["samples"] - 1
     # the options the case is about were in force
     if case == "tight_bounds":
         assert seen["projected"] > 0 and seen["clamped"] > 0
@@ -239,6 +320,8 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
         assert seen["integral"] == 0
     if case == "motion_scale":
         assert seen["scaled"] > 0, "the image-motion scale never departed from 1"
+    if case == "start_off":
+        assert seen["blended"] > 0.5 * seen["samples"], "x_d was not blended in"
 
 
 @pytest.fixture(scope="module", params=CONFIGS)
@@ -374,19 +457,23 @@ def test_compiled_regressor_is_the_models_and_the_reference_stays(rng):
 
 # -- the frame predictor's re-run --------------------------------------------------------------
 @pytest.mark.parametrize("gain, drift_gain", [(1.0, 0.0), (0.7, 0.3)])
-def test_compiled_rerun_equals_numpy_at_every_sample(gain, drift_gain, rng):
-    # a 1 kHz joint stream with a frame captured 33 ms before it arrives, every 33 samples;
-    # the same commits into a numpy predictor and one with the compiled re-run
-    reference, compiled = (FramePredictor(0.2, gain, drift_gain) for _ in range(2))
-    compiled.rerun = rerun
+def test_buffered_predictor_equals_numpy_at_every_sample(gain, drift_gain, rng):
+    # a 1 kHz joint stream with a frame captured 33 ms before it arrives, every 33 samples
+    # (some samples committed without a prediction, before the first frame); the same
+    # commits into the list-based numpy predictor and the buffered, compiled one, whose
+    # arrays start small enough to be compacted and grown during the run
     m2, reruns = 6, 0
-    for k in range(700):
+    reference = FramePredictor(0.2, gain, drift_gain)
+    compiled = BufferedFramePredictor(0.2, gain, drift_gain, m2, capacity=64)
+    for k in range(1500):
         t = k * 1e-3
         rate = np.array([rng.normal(scale=50.0, size=m2), rng.normal(scale=0.05, size=m2),
                          rng.uniform(1.0, 2.0, m2)])
         frame = None
-        if k % 33 == 0 and k >= 33:
+        if k % 33 == 0 and k >= 66:
             frame, stamp = rng.normal(300.0, 5.0, m2), t - 0.033
+        elif k == 20:
+            frame, stamp = rng.normal(300.0, 5.0, m2), t        # the first frame, of now
         out = []
         for p in (reference, compiled):
             if frame is not None:
@@ -396,15 +483,22 @@ def test_compiled_rerun_equals_numpy_at_every_sample(gain, drift_gain, rng):
                 x_hat = p.predict(t)
             p.commit(t, x_hat, rate, stamp if frame is not None else None)
             out.append(x_hat)
-        reruns += frame is not None
+        reruns += frame is not None and stamp < t
+        assert compiled.times == reference.times, f"the buffer's times at sample {k}"
+        assert compiled.check_stamp(t - 0.25, t) == reference.check_stamp(t - 0.25, t)
         if out[0] is None:
-            assert out[1] is None
+            assert out[1] is None and compiled.x_hat is None
             continue
         assert_close(out[1], out[0], f"x_hat at sample {k}")
-        for j, (a, b) in enumerate(zip(compiled.history, reference.history)):
+        assert_close(compiled.x_hat, reference.x_hat, f"x_hat property at sample {k}")
+        assert_close(compiled.drift, reference.drift, f"drift at sample {k}")
+        back = compiled.to_lists()
+        for j, (a, b) in enumerate(zip(back.history, reference.history)):
+            assert (a is None) == (b is None), f"history {j} at sample {k}"
             if b is not None:
                 assert_close(a, b, f"history {j} at sample {k}")
-    assert reruns >= 19
+    assert reruns >= 40
+    assert compiled._times.shape[0] > 64, "the arrays never grew"
 
 
 def test_a_late_camera_run_is_the_same_with_either_backend(tmp_path):
@@ -416,7 +510,7 @@ def test_a_late_camera_run_is_the_same_with_either_backend(tmp_path):
         scenario = load_scenario(path, LATE_CAMERA + ["sim_node.control_period=0.001",
                                                       f"controller_node.backend={backend}"])
         tracker = AdaptiveVisualTracker(scenario.controller)
-        assert (tracker.predictor.rerun is not None) == (backend == "compiled")
+        assert isinstance(tracker.predictor, BufferedFramePredictor) == (backend == "compiled")
         out = tmp_path / backend
         summary = run_scenario(scenario, str(out), 1.0, progress=False, record=False,
                                plots=False)

@@ -34,6 +34,7 @@ import pytest
 from conftest import ROOT
 from test_urdf_kinematics import SYNTHETIC
 from visual_adaptive_servo.config.scenario import load_scenario
+from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
 from visual_adaptive_servo.models import make_model, PaperRRRCamera
 from visual_adaptive_servo.models.kinematic_regressor import KinematicRegressor
 from visual_adaptive_servo.models.urdf_chain import load_chain
@@ -107,35 +108,29 @@ def test_compiled_tensors_equal_numpy_with_prismatic_joint_and_known_lengths(
         assert_tensors_equal(compiled.tensors(q, qd), numpy_.tensors(q, qd), f"#{k}")
 
 
-class Recorded:
-    """``model.kinematic_tensors`` that keeps every (q, q_dot, tensors) it is called with."""
-
-    def __init__(self, model):
-        self.function, self.calls = model.kinematic_tensors, []
-
-    def __call__(self, q, qd):
-        out = self.function(q, qd)
-        self.calls.append((np.array(q, dtype=float), np.array(qd, dtype=float),
-                           tuple(a.copy() for a in out)))
-        return out
-
-
-def test_compiled_tensors_equal_numpy_at_every_sample_of_a_closed_loop_run(shipped, tmp_path):
+def test_compiled_tensors_equal_numpy_at_every_sample_of_a_closed_loop_run(
+        shipped, tmp_path, monkeypatch):
+    # the joint states of every sample of a closed loop (the tracker's compiled sample
+    # evaluates the same kernel inside it, test_compiled_law.py)
     name, scenario = shipped
     model = scenario.controller.model
-    recorded = Recorded(model)
-    model.kinematic_tensors = recorded
-    try:
-        summary = run_scenario(scenario, str(tmp_path), DURATIONS[name], progress=False,
-                               record=False, plots=False)
-    finally:
-        del model.kinematic_tensors
+    states = []
+    step = AdaptiveVisualTracker.step
+
+    def recorded(self, t, q, qd, x=None, x_stamp=None):
+        states.append((np.array(q, dtype=float), np.array(qd, dtype=float)))
+        return step(self, t, q, qd, x, x_stamp)
+
+    monkeypatch.setattr(AdaptiveVisualTracker, "step", recorded)
+    summary = run_scenario(scenario, str(tmp_path), DURATIONS[name], progress=False,
+                           record=False, plots=False)
     assert not summary["diverged"] and summary["steps"] == round(
         DURATIONS[name] / scenario.sim.control_period)
-    assert len(recorded.calls) >= summary["steps"]
+    assert len(states) == summary["steps"]
     reference = reference_of(model)
-    for k, (q, qd, out) in enumerate(recorded.calls):
-        assert_tensors_equal(out, reference(q, qd), f"{name} call {k}")
+    for k, (q, qd) in enumerate(states):
+        assert_tensors_equal(model.kinematic_tensors(q, qd), reference(q, qd),
+                             f"{name} sample {k}")
 
 
 def test_closed_loop_figures_are_the_same_with_either_backend(shipped, tmp_path):

@@ -138,6 +138,23 @@ class EstimatorState:
                             + self.a_z.tolist() + self.a_d.tolist()))
 
 
+class _LazyFlatState(EstimatorState):
+    """An :class:`EstimatorState` of one flat array whose four fields are made when first read.
+
+    What the compiled sample commits (:meth:`AdaptiveVisualTracker._sample_compiled`):
+    a 1 kHz node publishes the estimates at a lower rate, so most samples' fields
+    are never read.  Equal to :meth:`EstimatorState.from_flat` of the same array.
+    """
+
+    def __getattr__(self, name):          # only for names not in the instance's dict
+        if name not in ("x_obs", "a_z_perp", "a_z", "a_d"):
+            raise AttributeError(name)
+        flat, (i, j, k) = self.__dict__["_flat"]
+        views = {"x_obs": flat[:i], "a_z_perp": flat[i:j], "a_z": flat[j:k], "a_d": flat[k:]}
+        self.__dict__.update(views)
+        return views[name]
+
+
 @dataclass(frozen=True)
 class LawOutput:
     """Everything :func:`control_law` computes at one instant."""
@@ -587,6 +604,10 @@ def validate_vector(name, value, size):
     arr = np.asarray(value, dtype=float)
     if arr.shape != (size,):
         raise InputError(f"{name}: expected {size} values, got shape {arr.shape}")
+    if not (arr.flags.c_contiguous and arr.flags.writeable):
+        # a strided or read-only array (a view, a message's buffer) would make the compiled
+        # kernels compile another specialisation, for seconds, in the control loop
+        arr = np.array(arr)
     if not _all_finite(arr.tolist()):
         raise InputError(f"{name}: contains NaN or inf: {arr.tolist()}")
     return arr
@@ -644,6 +665,8 @@ class AdaptiveVisualTracker:
         self.report = None          # the start-up report (start_report), at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self._law_backend = self._law_kernel = None     # _compiled_law
+        self._fast = None           # the compiled sample (sample_kernels.py), with the law
+        self._fast_layout = None    # the CompiledSample that wrote _fast_prev
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
@@ -667,8 +690,13 @@ class AdaptiveVisualTracker:
             np.concatenate([np.zeros(m2), np.ravel(c.a_z_perp_init), np.ravel(c.a_z_init),
                             np.ravel(c.a_d_init)]).astype(float),
             (m2, m2 + p_perp, m2 + p_perp + p_z))
+        # the last accepted sample's array when the compiled sample wrote it, else None (then
+        # rates, e_int and x_d of that sample are read from it: see the properties below)
+        self._fast_prev = None
         self.rates = None
         self.e_int = np.zeros(2 * self.model.m)   # integral of x_o - x_d (reference.integral)
+        self._xd_last = None
+        self._fast_sample = None    # (array, layout) of this sample's compiled sample, if any
         self.desired = None
         self.t_last = None          # time of the last accepted sample
         self.t_last_feature = None  # time of the last valid feature
@@ -776,7 +804,7 @@ class AdaptiveVisualTracker:
             self._check_stale(t)
             return self._reject(t, q, qd, problems)
         self._count_frame(t, stamp)
-        return self._sample(t, q, qd, frame, self.model.kinematic_tensors(q, qd), True)
+        return self._sample(t, q, qd, frame, None, True)
 
     def _check_stale(self, t):
         """Mark the camera stale when no frame was applied for ``safety.camera_timeout``."""
@@ -803,13 +831,13 @@ class AdaptiveVisualTracker:
         time and follows x_hat_dot = Z_hat^-1 J_hat(q, x_hat) q_dot from the joint
         samples since (docs/latency.md).
         """
-        tensors = self.model.kinematic_tensors(q, qd)
         if frame is not None:
             if self.scale is not None:
                 self.scale.frame(stamp, frame)
             x_hat = self.predictor.correct(stamp, frame, t)
         else:
             x_hat = self.predictor.predict(t)
+        applied = stamp if frame is not None else None
         if x_hat is None:
             problems = problems or ["feature x: waiting for the first camera frame"]
         elif frame is None and self._check_stale(t):
@@ -818,16 +846,26 @@ class AdaptiveVisualTracker:
         else:
             if frame is not None:
                 self._count_frame(t, stamp)
-            result = self._sample(t, q, qd, x_hat, tensors, frame is not None)
-            rate = (self._model_rate if result.status == "ok" and self._model_rate is not None
-                    else self._prediction_rate(tensors, qd, self.state))
-            self._commit_prediction(t, x_hat, rate, stamp if frame is not None else None)
+            result = self._sample(t, q, qd, x_hat, None, frame is not None)
+            if result.status == "ok" and self._fast_sample is not None:
+                # the compiled sample computed the scale's speed and the scaled rate
+                res, fast = self._fast_sample
+                if self.scale is not None:
+                    self.scale.record(t, res[fast.speed].tolist())
+                self.predictor.commit(t, x_hat, res[fast.commit_rate].reshape(3, fast.m2),
+                                      applied)
+            else:
+                rate = (self._model_rate
+                        if result.status == "ok" and self._model_rate is not None
+                        else self._prediction_rate(self.model.kinematic_tensors(q, qd), qd,
+                                                   self.state))
+                self._commit_prediction(t, x_hat, rate, applied)
             if problems and result.status == "ok":
                 result = replace(result, problems=tuple(problems))
             return result
         # not run: keep the joint buffer continuous for the frames still to come
-        self._commit_prediction(t, x_hat, self._prediction_rate(tensors, qd, self.state),
-                                stamp if frame is not None else None)
+        self._commit_prediction(t, x_hat, self._prediction_rate(
+            self.model.kinematic_tensors(q, qd), qd, self.state), applied)
         return self._reject(t, q, qd, problems)
 
     def _commit_prediction(self, t, x_hat, rate, stamp):
@@ -850,8 +888,21 @@ class AdaptiveVisualTracker:
         return J_perp.dot(qd), Zh_rate, Zh
 
     def _sample(self, t, q, qd, x, tensors, with_frame):
-        """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit."""
+        """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit.
+
+        ``tensors``: the model's kinematic tensors at (q, q_dot), or None (computed here
+        when needed).  A sample that does not restart the observer runs compiled in one
+        call when the compiled backend is on (:meth:`_sample_compiled`); this code is
+        its reference.
+        """
         restarting = self.t_last is None or self.stale
+        self._fast_sample = None
+        if not restarting:
+            fast = self._compiled_sample()
+            if fast is not None and self._fast_prev is not None:
+                return self._sample_compiled(fast, t, q, qd, x, with_frame)
+        if tensors is None:
+            tensors = self.model.kinematic_tensors(q, qd)
         e_int = self.e_int
         if restarting:
             state = replace(self.state, x_obs=x.copy())
@@ -903,12 +954,117 @@ class AdaptiveVisualTracker:
             log.info("input valid again at t=%.4f", t)
             self._rejecting = ()
         self.last_tau, self.t_last_tau = tau, t
+        fast = self._compiled_sample()
+        if fast is not None:
+            # what the next sample, compiled, reads of this one
+            self._fast_prev, self._fast_layout = fast.record(
+                _flat_of(state), _flat_of(out.rates), e_int, xd), fast
+        else:
+            self._fast_prev = None
         return _frozen(StepResult, {
             "t": t, "tau": tau, "x_d": xd, "x_obs": state.x_obs, "error": x - xd,
             "z_hat": out.z_hat, "state": state, "status": "ok", "problems": (),
             "saturated": saturated, "projection_active": out.projection_active,
             "damped": out.damped, "sigma_min": out.sigma_min, "tau_unsaturated": out.tau,
             "flags": {}, "motion_scale": self._scale_value})
+
+    def _sample_compiled(self, fast, t, q, qd, x, with_frame):
+        """:meth:`_sample` of a sample that does not restart, in one compiled call.
+
+        The same steps in the same order (:mod:`.sample_kernels`): the Euler step of
+        the state, the motion scale's advance, the integral, the projection's test
+        and clamp, x_d(t), the law, the checks, the saturation; nothing is kept when
+        the sample is refused.
+        """
+        config = self.config
+        key = fast.key
+        if key is None or key[0] is not self.gains or key[1] is not config:
+            fast.prepare(self.gains, config, self.projection)
+        if self.desired is not fast.desired:
+            fast.set_desired(self.desired)
+        dt = min(t - self.t_last, config["max_dt"])
+        scale = self.scale
+        if scale is not None:
+            scale.advance(dt)
+            s, s_dot = scale.value, scale.derivative
+        else:
+            s, s_dot = 1.0, 0.0
+        # q, q_dot and x are contiguous, writable float64 (validate_vector, the predictor)
+        res = np.empty(fast.size)
+        try:
+            finite, sigma_min, damped, active, saturated = fast.kernel(
+                fast.cf, fast.ci, fast.blend, self._fast_prev, res, q, qd, x, t, dt, s, s_dot)
+        except np.linalg.LinAlgError:
+            return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
+                                           "its pseudo-inverse; state kept)"])
+        if not finite:
+            return self._reject(t, q, qd, ["controller update is not finite (state kept)"])
+        # commit
+        state = _frozen(_LazyFlatState, {"_flat": (res[fast.state], fast.state_ends)})
+        self._model_rate = None         # the predictor's rate is in res (_step_predicted)
+        self._fast_prev, self._fast_layout, self._fast_sample = res, fast, (res, fast)
+        self.state, self._rates, self._e_int, self._xd, self.t_last = state, None, None, None, t
+        if with_frame:
+            self.t_last_feature = t
+        self.stale = False
+        if self._rejecting:
+            log.info("input valid again at t=%.4f", t)
+            self._rejecting = ()
+        unsaturated = res[fast.tau_unsaturated]
+        tau = res[fast.tau] if saturated else unsaturated     # as _sample: the same array
+        self.last_tau, self.t_last_tau = tau, t
+        return _frozen(StepResult, {
+            "t": t, "tau": tau, "x_d": res[fast.xd], "x_obs": res[fast.x_obs],
+            "error": res[fast.error], "z_hat": res[fast.z_hat], "state": state, "status": "ok",
+            "problems": (), "saturated": saturated, "projection_active": active,
+            "damped": damped, "sigma_min": sigma_min, "tau_unsaturated": unsaturated,
+            "flags": {}, "motion_scale": s})
+
+    # the rates, the integral and x_d of the last accepted sample: a compiled sample keeps
+    # them in its array only (the attributes None), read from there when asked for
+    @property
+    def rates(self):
+        """The adaptation rates of the last accepted sample (an EstimatorState), or None."""
+        if self._rates is None and self._fast_prev is not None:
+            res, fast = self._fast_prev, self._fast_layout
+            self._rates = EstimatorState.from_flat(res[fast.rates], fast.state_ends)
+        return self._rates
+
+    @rates.setter
+    def rates(self, value):
+        self._rates = value
+
+    @property
+    def e_int(self):
+        """The reference's integral of x_o - x_d (zero when reference.integral_rate is 0)."""
+        if self._e_int is None:
+            self._e_int = self._fast_prev[self._fast_layout.e_int]
+        return self._e_int
+
+    @e_int.setter
+    def e_int(self, value):
+        self._e_int = value
+
+    @property
+    def _xd_last(self):
+        if self._xd is None and self._fast_prev is not None:
+            self._xd = self._fast_prev[self._fast_layout.xd]
+        return self._xd
+
+    @_xd_last.setter
+    def _xd_last(self, value):
+        self._xd = value
+
+    def _compiled_sample(self):
+        """The :class:`~.sample_kernels.CompiledSample` of this tracker, or None.
+
+        None unless the compiled law runs, the trajectory is one the kernel evaluates,
+        and neither :meth:`_law` nor :meth:`_sample` is overridden (the baselines).
+        """
+        if type(self)._law is not _TRACKER_LAW or type(self)._sample is not _TRACKER_SAMPLE:
+            return None
+        self._compiled_law()
+        return self._fast
 
     def _design(self, q):
         """Fix the joint damping and derive the gains left out, at the first valid joint sample.
@@ -1065,21 +1221,28 @@ class AdaptiveVisualTracker:
         """:class:`~.law_kernels.CompiledLaw` when the model runs the compiled backend, else None.
 
         Then :meth:`_law` evaluates the compiled kernel instead of :func:`control_law`
-        (the same law, tested equal to 1e-12), and the frame predictor re-runs a late
-        frame compiled (:mod:`.prediction_kernels`); followed when the model's backend
-        changes.
+        (the same law, tested equal to 1e-12), a sample that does not restart runs
+        whole in one compiled call (:mod:`.sample_kernels`), and the frame predictor
+        keeps its buffer in arrays with its steps compiled
+        (:class:`~.prediction_kernels.BufferedFramePredictor`); followed when the
+        model's backend changes.
         """
         backend = getattr(self.model, "backend", "numpy")
         if backend != self._law_backend:
-            self._law_backend, self._law_kernel = backend, None
-            self.predictor.rerun = None
+            self._law_backend, self._law_kernel, self._fast = backend, None, None
+            to_lists = getattr(self.predictor, "to_lists", None)
+            if to_lists is not None:
+                self.predictor = to_lists()     # the reference predictor, on lists
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
                 from .law_kernels import CompiledLaw
-                from .prediction_kernels import rerun
+                from .prediction_kernels import BufferedFramePredictor
+                from .sample_kernels import CompiledSample, supports
 
                 self._law_kernel = CompiledLaw(self.model)
-                self.predictor.rerun = rerun    # a late frame's re-run, compiled too
+                self.predictor = BufferedFramePredictor.of(self.predictor, 2 * self.model.m)
+                self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
+                              if supports(self) else None)
         return self._law_kernel
 
     def _reject(self, t, q, qd, problems):
@@ -1117,6 +1280,18 @@ class AdaptiveVisualTracker:
         if self.damping is not None and np.any(self.damping):
             tau = tau - self.damping.dot(qd)
         return np.clip(tau, -self.config.torque_limit, self.config.torque_limit)
+
+
+_TRACKER_LAW = AdaptiveVisualTracker._law
+_TRACKER_SAMPLE = AdaptiveVisualTracker._sample
+
+
+def _flat_of(state):
+    """The four fields of an EstimatorState end to end (its own array when it is flat)."""
+    flat = state.__dict__.get("_flat")
+    if flat is not None:
+        return flat[0]
+    return np.concatenate([state.x_obs, state.a_z_perp, state.a_z, state.a_d])
 
 
 def health(result):

@@ -82,8 +82,6 @@ class FramePredictor:
         self.rates = []             # (J_perp q_dot, Z_dot, Z) per sample, (3, 2m)
         self.history = []           # x_hat at each sample (None before the first frame)
         self.last_stamp = None      # capture time of the last applied frame
-        # the re-run of a late frame compiled (prediction_kernels.rerun), or None: numpy below
-        self.rerun = None
 
     def reset(self):
         self.times.clear()
@@ -142,11 +140,6 @@ class FramePredictor:
             prior = self._advance(prior, stamp - self.times[i], self.rates[i])
         self._learn_drift(prior, x_frame, stamp)
         x = self._blend(prior, x_frame)
-        if self.rerun is not None:
-            steps = self.rerun(self.times[i:] + [t], stamp, np.array(self.rates[i:]), x,
-                               self.drift)
-            self.history[i + 1:] = list(steps[:-1])
-            return steps[-1]
         # the Euler steps x_{k+1} = x_k + dt_k (jq_k - x_k z_dot_k) / z_k + dt_k b are affine,
         # x_{k+1} = a_k x_k + c_k: with P_k the running product of the a_k, every step of
         # the re-run is x_k = P_k (x + sum_{j<k} c_j / P_{j+1}) -- a few array operations
@@ -179,7 +172,9 @@ class FramePredictor:
         the estimates used at t.  ``applied_stamp``: the frame applied at this sample.
         """
         self.times.append(t)
-        self.rates.append(np.array(rate))       # one (3, 2m) array: stacking a re-run is cheap
+        # one (3, 2m) array: stacking a re-run is cheap; not copied when it is one (the
+        # tracker's are new arrays, never written afterwards)
+        self.rates.append(np.asarray(rate, dtype=float))
         self.history.append(x_hat)
         if applied_stamp is not None:
             self.last_stamp = applied_stamp

@@ -14,13 +14,16 @@
 
 """The late frame's re-run of :meth:`.prediction.FramePredictor.correct`, compiled with numba.
 
-The numpy code in ``correct`` stays the reference: this kernel evaluates the
-same closed form, x_k = P_k (x + sum_{j<k} c_j / P_{j+1}) with
-a_k = 1 - dt_k Z_dot_k / Z_k, c_k = dt_k (J_perp q_dot_k / Z_k + b) and P the
-running product of the a_k, in the same order (so the same numbers), as one
-loop instead of ~10 numpy calls and a stack of the buffer's rate arrays.
-The tracker sets ``FramePredictor.rerun`` to :func:`rerun` when its model
-runs the compiled backend.  Importing this module imports numba.
+The numpy code of :class:`.prediction.FramePredictor` stays the reference.
+:class:`BufferedFramePredictor` is the same predictor with its buffer in
+preallocated arrays and its steps compiled: the prediction between frames
+(:func:`_predict`) and a late frame's whole correction (:func:`_correct_late`),
+whose re-run (:func:`_rerun`) evaluates the reference's closed form,
+x_k = P_k (x + sum_{j<k} c_j / P_{j+1}) with a_k = 1 - dt_k Z_dot_k / Z_k,
+c_k = dt_k (J_perp q_dot_k / Z_k + b) and P the running product of the a_k, in
+the same order (so the same numbers), as one loop instead of ~10 numpy calls and
+a stack of the buffer's rate arrays.  The tracker runs it with the compiled
+backend.  Importing this module imports numba.
 """
 
 from __future__ import annotations
@@ -28,10 +31,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..models.kernels import compiled
+from .prediction import FramePredictor, TIME_EPS
 
 
 @compiled(error_model="numpy")
 def _rerun(times, stamp, rates, x, drift):
+    """x_hat at ``times[1:]`` from x at ``stamp`` (between times[0] and times[1]).
+
+    ``times`` (k + 1,) the buffer's joint-sample times from the last one at or
+    before the stamp, then now; ``rates`` (k, 3, 2m) their (J_perp q_dot, Z_dot,
+    Z); ``x`` (2m,) the frame's x_hat at the stamp; ``drift`` b (2m,).  Returns
+    (k, 2m).
+    """
     k, m2 = rates.shape[0], x.shape[0]
     steps = np.empty((k, m2))
     for j in range(m2):
@@ -47,16 +58,195 @@ def _rerun(times, stamp, rates, x, drift):
     return steps
 
 
-def rerun(times, stamp, rates, x, drift):
-    """x_hat at ``times[1:]`` from x at ``stamp`` (between times[0] and times[1]).
+@compiled(error_model="numpy")
+def _predict(x, rate, dt, drift, out):
+    """FramePredictor._advance: out = x + dt ((jq - x z_dot) / z + b)."""
+    for j in range(x.shape[0]):
+        out[j] = x[j] + dt * ((rate[0, j] - x[j] * rate[1, j]) / rate[2, j] + drift[j])
 
-    ``times`` (k + 1,) the buffer's joint-sample times from the last one at or
-    before the stamp, then now; ``rates`` (k, 3, 2m) their (J_perp q_dot, Z_dot,
-    Z); ``x`` (2m,) the frame's x_hat at the stamp; ``drift`` b, 0.0 or (2m,).
-    Returns (k, 2m).
+
+@compiled(error_model="numpy")
+def _correct_late(times, rates, history, has, i, end, stamp, x_frame, t, gain, drift_gain,
+                  drift, interval, out):
+    """FramePredictor.correct of a frame captured at ``stamp`` before the last sample.
+
+    ``i`` is the buffer's last sample at or before the stamp, ``end`` one past the
+    last; ``interval`` the time since the last applied frame (NaN: none, so no drift
+    is learnt).  The prediction at the stamp from sample i, the drift learnt from the
+    innovation (``drift`` updated in place), the blend, then the re-run of
+    :func:`_rerun` from the stamp over samples i .. end-1 and to t: the predictions of
+    samples i+1 .. end-1 are replaced in ``history`` (and marked in ``has``), x at t
+    written into ``out``.
     """
-    x = np.ascontiguousarray(x, dtype=float)
-    if np.ndim(drift) == 0:
-        drift = np.full(x.shape[0], float(drift))
-    return _rerun(np.asarray(times, dtype=float), float(stamp), rates, x,
-                  np.ascontiguousarray(drift, dtype=float))
+    m2 = x_frame.shape[0]
+    x = np.empty(m2)
+    learn = drift_gain > 0.0 and has[i] and interval == interval
+    for j in range(m2):
+        if has[i]:
+            prior = history[i, j] + (stamp - times[i]) * (
+                (rates[i, 0, j] - history[i, j] * rates[i, 1, j]) / rates[i, 2, j] + drift[j])
+            if learn:
+                drift[j] = drift[j] + drift_gain * (x_frame[j] - prior) / interval
+            x[j] = x_frame[j] if gain >= 1.0 else prior + gain * (x_frame[j] - prior)
+        else:
+            x[j] = x_frame[j]
+    k = end - i
+    times_rerun = np.empty(k + 1)
+    times_rerun[:k] = times[i:end]
+    times_rerun[k] = t
+    steps = _rerun(times_rerun, stamp, rates[i:end], x, drift)
+    history[i + 1:end] = steps[:k - 1]
+    has[i + 1:end] = True
+    out[:] = steps[k - 1]
+
+
+class BufferedFramePredictor(FramePredictor):
+    """:class:`.prediction.FramePredictor` on preallocated arrays, its steps compiled.
+
+    The same predictor (the list-based class stays the reference; equal at every
+    sample in test_compiled_law.py): the buffer's times, rates and predictions live
+    in arrays with a start and an end index instead of lists, so a late frame's
+    re-run reads and replaces them in place (:func:`_correct_late`) instead of
+    stacking the buffer's arrays and making one per sample again, and the
+    prediction between frames is one kernel call (:func:`_predict`).  The tracker
+    runs it with the compiled backend.
+    """
+
+    def __init__(self, horizon, gain, drift_gain, m2, capacity=512):
+        # FramePredictor.__init__ is not called: the arrays below are its buffer
+        self.horizon = float(horizon)
+        self.gain = float(gain)
+        self.drift_gain = float(drift_gain)
+        self.drift = 0.0
+        self.last_stamp = None
+        self.m2 = int(m2)
+        self._zeros = np.zeros(self.m2)     # b before any drift is learnt
+        self._allocate(int(capacity))
+
+    def _allocate(self, capacity):
+        self._times = np.empty(capacity)
+        self._rates = np.empty((capacity, 3, self.m2))
+        self._history = np.empty((capacity, self.m2))
+        self._has = np.zeros(capacity, dtype=np.bool_)
+        self._start = self._end = 0
+
+    @classmethod
+    def of(cls, predictor, m2):
+        """The buffered predictor with the state of a list-based one (the same samples)."""
+        new = cls(predictor.horizon, predictor.gain, predictor.drift_gain, m2,
+                  max(512, 2 * len(predictor.times)))
+        for t, rate, x in zip(predictor.times, predictor.rates, predictor.history):
+            new.commit(t, x, rate)
+        new.last_stamp, new.drift = predictor.last_stamp, predictor.drift
+        return new
+
+    def to_lists(self):
+        """The list-based :class:`.prediction.FramePredictor` with this state."""
+        other = FramePredictor(self.horizon, self.gain, self.drift_gain)
+        a, b = self._start, self._end
+        other.times = self._times[a:b].tolist()
+        other.rates = [rate.copy() for rate in self._rates[a:b]]
+        other.history = [x.copy() if has else None
+                         for x, has in zip(self._history[a:b], self._has[a:b])]
+        other.last_stamp, other.drift = self.last_stamp, self.drift
+        return other
+
+    def reset(self):
+        self._start = self._end = 0
+        self.last_stamp = None
+        self.drift = 0.0
+
+    @property
+    def times(self):
+        """The buffer's joint-sample times (a copy: read-only use)."""
+        return self._times[self._start:self._end].tolist()
+
+    @property
+    def x_hat(self):
+        end = self._end
+        if end == self._start or not self._has[end - 1]:
+            return None
+        return self._history[end - 1].copy()
+
+    def check_stamp(self, stamp, t):
+        if stamp > t + TIME_EPS:
+            return f"stamped {stamp:.6f} s, in the future of the joint sample at {t:.6f} s"
+        if self.last_stamp is not None and stamp <= self.last_stamp + TIME_EPS:
+            return (f"stamped {stamp:.6f} s, not after the last applied frame "
+                    f"({self.last_stamp:.6f} s)")
+        empty = self._end == self._start
+        if stamp < t - TIME_EPS and (empty or stamp < self._times[self._start] - TIME_EPS
+                                     or t - stamp > self.horizon + TIME_EPS):
+            oldest = "none" if empty else f"{self._times[self._start]:.6f} s"
+            return (f"stamped {stamp:.6f} s, {t - stamp:.3f} s old: older than the joint "
+                    f"buffer (horizon {self.horizon:g} s, oldest sample {oldest})")
+        return None
+
+    def _drift_array(self):
+        drift = self.drift
+        if np.ndim(drift) == 0:
+            return np.full(self.m2, float(drift))
+        return np.array(drift, dtype=float)
+
+    def predict(self, t):
+        end = self._end
+        if end == self._start or not self._has[end - 1]:
+            return None
+        out = np.empty(self.m2)
+        drift = self.drift
+        _predict(self._history[end - 1], self._rates[end - 1], t - self._times[end - 1],
+                 self._zeros if isinstance(drift, float) else drift, out)
+        return out
+
+    def correct(self, stamp, x_frame, t):
+        x_frame = np.asarray(x_frame, dtype=float)
+        if stamp >= t - TIME_EPS:
+            return super().correct(stamp, x_frame, t)     # a frame of now: nothing to re-run
+        a, b = self._start, self._end
+        i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+        drift = self._drift_array()
+        interval = (stamp - self.last_stamp if self.last_stamp is not None else float("nan"))
+        out = np.empty(self.m2)
+        _correct_late(self._times, self._rates, self._history, self._has, i, b, stamp,
+                      np.ascontiguousarray(x_frame), t, self.gain, self.drift_gain, drift,
+                      interval, out)
+        if self.drift_gain > 0.0 and self._has[i] and self.last_stamp is not None:
+            self.drift = drift
+        return out
+
+    def commit(self, t, x_hat, rate, applied_stamp=None):
+        end = self._end
+        if end == self._times.shape[0]:
+            self._make_room()
+            end = self._end
+        self._times[end] = t
+        self._rates[end] = rate
+        if x_hat is None:
+            self._has[end] = False
+        else:
+            self._history[end] = x_hat
+            self._has[end] = True
+        self._end = end + 1
+        if applied_stamp is not None:
+            self.last_stamp = applied_stamp
+        if t - self._times[self._start] > 1.5 * self.horizon:
+            # trim_buffers: keep the last sample at or before t - horizon
+            a, b = self._start, self._end
+            first = int(np.searchsorted(self._times[a:b], t - self.horizon - TIME_EPS,
+                                        side="left")) - 1
+            self._start = a + max(first, 0)
+
+    def _make_room(self):
+        """Move the live samples to the front, or double the arrays when they fill them."""
+        a, b = self._start, self._end
+        live = b - a
+        times, rates, history, has = self._times, self._rates, self._history, self._has
+        if live > times.shape[0] // 2:
+            self._allocate(2 * times.shape[0])
+        else:
+            self._start = self._end = 0
+        self._times[:live] = times[a:b]
+        self._rates[:live] = rates[a:b]
+        self._history[:live] = history[a:b]
+        self._has[:live] = has[a:b]
+        self._start, self._end = 0, live
