@@ -46,6 +46,7 @@ from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import (_flat_law_output, _law_output,
                                                       AdaptiveVisualTracker, control_law,
                                                       EstimatorState, Leakage, Projection)
+from visual_adaptive_servo.control.motion_scale import MotionScale
 from visual_adaptive_servo.control.prediction import FramePredictor
 from visual_adaptive_servo.control.trajectory import BlendedStart
 from visual_adaptive_servo.models import PaperRRRCamera
@@ -56,6 +57,8 @@ from visual_adaptive_servo.runner import run_scenario
 pytest.importorskip("numba", reason="the compiled backend needs numba")
 
 from visual_adaptive_servo.control.law_kernels import CompiledLaw  # noqa: E402  (numba)
+from visual_adaptive_servo.control.motion_scale_kernels import (  # noqa: E402  (numba)
+    BufferedMotionScale)
 from visual_adaptive_servo.control.prediction_kernels import (  # noqa: E402  (numba)
     BufferedFramePredictor)
 from visual_adaptive_servo.control.sample_kernels import CompiledSample  # noqa: E402  (numba)
@@ -498,6 +501,39 @@ def test_buffered_predictor_equals_numpy_at_every_sample(gain, drift_gain, rng):
             if b is not None:
                 assert_close(a, b, f"history {j} at sample {k}")
     assert reruns >= 40
+    assert compiled._times.shape[0] > 64, "the arrays never grew"
+
+
+@pytest.mark.parametrize("m2", [4, 6, 10])
+def test_buffered_motion_scale_equals_the_lists_at_every_frame(m2, rng):
+    # a 1 kHz path (speeds of a moving image) and a frame every 33 samples captured 33 ms
+    # late, its pixels s = 1.3 times the path plus noise; the same calls into the
+    # list-based scale and the buffered, compiled one (arrays small enough to be compacted
+    # and grown); 2m = 10 sums as numpy's pairwise np.sum does
+    reference = MotionScale(0.5, 2.0, 0.5, 2.0, 0.5, 0.2)
+    compiled = BufferedMotionScale(0.5, 2.0, 0.5, 2.0, 0.5, 0.2, m2, capacity=64)
+    targets = 0
+    for k in range(3000):
+        t = k * 1e-3
+        speed = 40.0 * np.sin(3.0 * t + np.arange(m2)) + rng.normal(scale=1.0, size=m2)
+        if k % 33 == 0 and k >= 66:
+            stamp = t - 0.033
+            x = 1.3 * reference.path_at(stamp) + rng.normal(scale=0.3, size=m2) + 200.0
+            got = [scale.frame(stamp, x) for scale in (reference, compiled)]
+            assert (got[0] is None) == (got[1] is None), f"frame at sample {k}"
+            if got[0] is not None:
+                assert_close(got[1], got[0], f"target at sample {k}")
+                targets += 1
+            assert compiled.weight == pytest.approx(reference.weight, rel=1e-14)
+            assert_close(compiled.to_lists().sums, reference.sums, f"sums at sample {k}")
+        for scale in (reference, compiled):
+            scale.advance(1e-3)
+            scale.record(t, speed)
+        assert compiled.times == reference.times, f"the path's times at sample {k}"
+        assert_close(compiled.value, reference.value, f"s at sample {k}")
+        assert_close(compiled.derivative, reference.derivative, f"ds/dt at sample {k}")
+        assert_close(compiled.path_at(t), reference.path_at(t), f"P at sample {k}")
+    assert targets > 50 and abs(reference.target - 1.3) < 0.1
     assert compiled._times.shape[0] > 64, "the arrays never grew"
 
 

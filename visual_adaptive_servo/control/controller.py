@@ -851,7 +851,7 @@ class AdaptiveVisualTracker:
                 # the compiled sample computed the scale's speed and the scaled rate
                 res, fast = self._fast_sample
                 if self.scale is not None:
-                    self.scale.record(t, res[fast.speed].tolist())
+                    self.scale.record(t, res[fast.speed])
                 self.predictor.commit(t, x_hat, res[fast.commit_rate].reshape(3, fast.m2),
                                       applied)
             else:
@@ -1223,24 +1223,31 @@ class AdaptiveVisualTracker:
         Then :meth:`_law` evaluates the compiled kernel instead of :func:`control_law`
         (the same law, tested equal to 1e-12), a sample that does not restart runs
         whole in one compiled call (:mod:`.sample_kernels`), and the frame predictor
-        keeps its buffer in arrays with its steps compiled
-        (:class:`~.prediction_kernels.BufferedFramePredictor`); followed when the
+        and the image-motion scale keep their buffers in arrays with their steps
+        compiled (:class:`~.prediction_kernels.BufferedFramePredictor`,
+        :class:`~.motion_scale_kernels.BufferedMotionScale`); followed when the
         model's backend changes.
         """
         backend = getattr(self.model, "backend", "numpy")
         if backend != self._law_backend:
             self._law_backend, self._law_kernel, self._fast = backend, None, None
-            to_lists = getattr(self.predictor, "to_lists", None)
-            if to_lists is not None:
-                self.predictor = to_lists()     # the reference predictor, on lists
+            # the reference predictor and scale, on lists
+            if hasattr(self.predictor, "to_lists"):
+                self.predictor = self.predictor.to_lists()
+            if hasattr(self.scale, "to_lists"):
+                self.scale = self.scale.to_lists()
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
                 from .law_kernels import CompiledLaw
+                from .motion_scale_kernels import BufferedMotionScale
                 from .prediction_kernels import BufferedFramePredictor
                 from .sample_kernels import CompiledSample, supports
 
                 self._law_kernel = CompiledLaw(self.model)
-                self.predictor = BufferedFramePredictor.of(self.predictor, 2 * self.model.m)
+                m2 = 2 * self.model.m
+                self.predictor = BufferedFramePredictor.of(self.predictor, m2)
+                if self.scale is not None:
+                    self.scale = BufferedMotionScale.of(self.scale, m2)
                 self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
                               if supports(self) else None)
         return self._law_kernel

@@ -1,0 +1,220 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The image-motion scale's path and regression on arrays, compiled with numba.
+
+:class:`.motion_scale.MotionScale` keeps its path in lists of Python floats
+and stays the readable reference; :class:`BufferedMotionScale` is the same
+scale with the path in preallocated arrays (a start and an end index, the same
+trim rule) and a frame's regression in one kernel (:func:`_frame`), with the
+same arithmetic in the same order (numpy's pairwise sum where the reference
+calls np.sum).  The tracker runs it with the compiled backend (test:
+test_compiled_law.py).  Importing this module imports numba.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..models.kernels import compiled
+from .motion_scale import MotionScale
+from .prediction import TIME_EPS
+
+
+@compiled(inline="always")
+def _numpy_sum(values):
+    """np.sum of a short float64 array, bit for bit (numpy's pairwise sum below 128 entries)."""
+    n = values.shape[0]
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += values[i]
+        return total
+    r = values[:8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += values[i + j]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += values[i]
+        i += 1
+    return total
+
+
+@compiled(error_model="numpy")
+def _frame(times, path, speed, start, end, stamp, x, sums, has_sums, weight, t_frame, window,
+           min_motion, lower, upper):
+    """MotionScale.frame on the arrays: returns (status, weight, target).
+
+    status 0: nothing done (no path at the stamp, or not after the last frame); 1: the
+    frame is in the sums (updated in place) but the regression is not trusted yet; 2:
+    ``target`` is the regression's new value.
+    """
+    i = start + np.searchsorted(times[start:end], stamp + TIME_EPS, side="right") - 1
+    if i < start or (has_sums and stamp <= t_frame):
+        return 0, weight, 0.0
+    m2 = x.shape[0]
+    h = stamp - times[i]
+    decay = 0.0
+    if has_sums:
+        decay = math.exp(-(stamp - t_frame) / window)
+    else:
+        weight = 0.0
+        for r in range(4):
+            for j in range(m2):
+                sums[r, j] = 0.0
+    w = decay * weight + 1.0
+    var_p = np.empty(m2)
+    cov = np.empty(m2)
+    for j in range(m2):
+        p = path[i, j] + h * speed[i, j]
+        sums[0, j] = decay * sums[0, j] + x[j]
+        sums[1, j] = decay * sums[1, j] + p
+        sums[2, j] = decay * sums[2, j] + x[j] * p
+        sums[3, j] = decay * sums[3, j] + p * p
+        sp = sums[1, j]
+        var_p[j] = sums[3, j] / w - (sp / w) * (sp / w)
+        cov[j] = sums[2, j] / w - sums[0, j] * sp / w ** 2
+    total = _numpy_sum(var_p)
+    if not total / m2 > max(min_motion ** 2, 1e-12):
+        return 1, w, 0.0
+    s = _numpy_sum(cov) / total
+    if lower > s:               # min(max(s, lower), upper) as Python evaluates it
+        s = lower
+    if upper < s:
+        s = upper
+    return 2, w, s
+
+
+@compiled(error_model="numpy")
+def _record(times, path, speed, start, end, t, v):
+    """MotionScale.record into row ``end``: P extended along the last speed, then v stored."""
+    times[end] = t
+    for j in range(v.shape[0]):
+        if end > start:
+            path[end, j] = path[end - 1, j] + (t - times[end - 1]) * speed[end - 1, j]
+        else:
+            path[end, j] = 0.0
+        speed[end, j] = v[j]
+
+
+class BufferedMotionScale(MotionScale):
+    """:class:`.motion_scale.MotionScale` with its path on arrays and its regression compiled."""
+
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, m2, capacity=512):
+        self.m2 = int(m2)
+        self._capacity = int(capacity)
+        super().__init__(window, rate, lower, upper, min_motion, horizon)
+
+    def reset(self):
+        # MotionScale.reset's lists are the arrays here; sums is None or the (4, 2m) array
+        self.value = 1.0
+        self.target = 1.0
+        self.weight = 0.0
+        self.sums = None
+        self.t_frame = None
+        self._allocate(self._capacity)
+
+    def _allocate(self, capacity):
+        self._times = np.empty(capacity)
+        self._path = np.empty((capacity, self.m2))
+        self._speed = np.empty((capacity, self.m2))
+        self._start = self._end = 0
+
+    @classmethod
+    def of(cls, scale, m2):
+        """The buffered scale with the state of a list-based one."""
+        new = cls(scale.window, scale.rate, scale.lower, scale.upper, scale.min_motion,
+                  scale.horizon, m2, max(512, 2 * len(scale.times)))
+        n = len(scale.times)
+        new._times[:n] = scale.times
+        if n:
+            new._path[:n] = scale.path
+            new._speed[:n] = scale.speed
+        new._end = n
+        new.value, new.target, new.weight, new.t_frame = (scale.value, scale.target,
+                                                          scale.weight, scale.t_frame)
+        new.sums = None if scale.sums is None else np.array(scale.sums, dtype=float)
+        return new
+
+    def to_lists(self):
+        """The list-based :class:`.motion_scale.MotionScale` with this state."""
+        other = MotionScale(self.window, self.rate, self.lower, self.upper, self.min_motion,
+                            self.horizon)
+        a, b = self._start, self._end
+        other.times = self._times[a:b].tolist()
+        other.path = self._path[a:b].tolist()
+        other.speed = self._speed[a:b].tolist()
+        other.value, other.target, other.weight, other.t_frame = (self.value, self.target,
+                                                                  self.weight, self.t_frame)
+        other.sums = None if self.sums is None else tuple(self.sums.tolist())
+        return other
+
+    def record(self, t, speed):
+        end = self._end
+        if end == self._times.shape[0]:
+            self._make_room()
+            end = self._end
+        _record(self._times, self._path, self._speed, self._start, end, t,
+                np.ascontiguousarray(speed, dtype=float))
+        self._end = end + 1
+        if t - self._times[self._start] > 1.5 * self.horizon:
+            a = self._start
+            first = int(np.searchsorted(self._times[a:end + 1], t - self.horizon - TIME_EPS,
+                                        side="left")) - 1
+            self._start = a + max(first, 0)
+
+    def path_at(self, stamp):
+        a, b = self._start, self._end
+        i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+        if i < a:
+            return None
+        return self._path[i] + (stamp - self._times[i]) * self._speed[i]
+
+    @property
+    def times(self):
+        """The path's joint-sample times (a copy: read-only use)."""
+        return self._times[self._start:self._end].tolist()
+
+    def frame(self, stamp, x):
+        has_sums = self.sums is not None
+        sums = self.sums if has_sums else np.zeros((4, self.m2))
+        status, weight, target = _frame(
+            self._times, self._path, self._speed, self._start, self._end, stamp,
+            np.ascontiguousarray(x, dtype=float), sums, has_sums, self.weight,
+            0.0 if self.t_frame is None else self.t_frame, self.window, self.min_motion,
+            self.lower, self.upper)
+        if status == 0:
+            return None
+        self.weight, self.t_frame, self.sums = weight, stamp, sums
+        if status == 1:
+            return None
+        self.target = target
+        return target
+
+    def _make_room(self):
+        """Move the live samples to the front, or double the arrays when they fill them."""
+        a, b = self._start, self._end
+        live = b - a
+        times, path, speed = self._times, self._path, self._speed
+        if live > times.shape[0] // 2:
+            self._allocate(2 * times.shape[0])
+        self._times[:live] = times[a:b]
+        self._path[:live] = path[a:b]
+        self._speed[:live] = speed[a:b]
+        self._start, self._end = 0, live
