@@ -1103,6 +1103,9 @@ class AdaptiveVisualTracker:
         gains = self._gains(D, designed)
         report = self.start_report(q, M_hat, gains)       # raises before anything is kept
         self.damping, self.designed, self.gains, self.report = D, designed, gains, report
+        fast = self._compiled_sample()
+        if fast is not None:
+            fast.prepare(gains, config, self.projection)    # packed now, not in a later sample
 
     def start(self, q):
         """Fix the damping and the gains at joint positions ``q`` now (else at the first sample).

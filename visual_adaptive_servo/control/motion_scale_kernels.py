@@ -120,6 +120,15 @@ class BufferedMotionScale(MotionScale):
         self.m2 = int(m2)
         self._capacity = int(capacity)
         super().__init__(window, rate, lower, upper, min_motion, horizon)
+        self._warm_up()
+
+    def _warm_up(self):
+        """Compile (or load) the kernels now, not at the first sample of a 1 kHz loop."""
+        m2 = self.m2
+        times, path, speed = np.array([0.0, 0.001]), np.zeros((2, m2)), np.ones((2, m2))
+        _record(times, path, speed, 0, 1, 0.001, np.ones(m2))
+        _frame(times, path, speed, 0, 2, 0.0015, np.ones(m2), np.zeros((4, m2)), False, 0.0,
+               0.0, self.window, self.min_motion, self.lower, self.upper)
 
     def reset(self):
         # MotionScale.reset's lists are the arrays here; sums is None or the (4, 2m) array

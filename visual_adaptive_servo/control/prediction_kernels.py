@@ -122,6 +122,15 @@ class BufferedFramePredictor(FramePredictor):
         self.m2 = int(m2)
         self._zeros = np.zeros(self.m2)     # b before any drift is learnt
         self._allocate(int(capacity))
+        self._warm_up()
+
+    def _warm_up(self):
+        """Compile (or load) the kernels now, not at the first frame of a 1 kHz loop."""
+        m2, ones = self.m2, np.ones(self.m2)
+        rates = np.ones((2, 3, m2))
+        _predict(ones, rates[0], 0.001, self._zeros, np.empty(m2))
+        _correct_late(np.array([0.0, 0.001]), rates, np.ones((2, m2)), np.ones(2, np.bool_), 0,
+                      2, 0.0005, ones, 0.002, 1.0, 0.0, np.zeros(m2), 1.0, np.empty(m2))
 
     def _allocate(self, capacity):
         self._times = np.empty(capacity)
