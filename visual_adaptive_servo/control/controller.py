@@ -667,6 +667,7 @@ class AdaptiveVisualTracker:
         self._law_backend = self._law_kernel = None     # _compiled_law
         self._fast = None           # the compiled sample (sample_kernels.py), with the law
         self._fast_layout = None    # the CompiledSample that wrote _fast_prev
+        self._bounds_of = self._bounds = None   # _check_feature
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
@@ -733,7 +734,10 @@ class AdaptiveVisualTracker:
     # -- the sample -------------------------------------------------------------
     def _check_feature(self, x):
         x = validate_vector("feature x", x, 2 * self.model.m)
-        u0, u1, v0, v1 = self.config["image_bounds"].tolist()
+        config = self.config
+        if self._bounds_of is not config:           # the bounds as floats, per configuration
+            self._bounds_of, self._bounds = config, config["image_bounds"].tolist()
+        u0, u1, v0, v1 = self._bounds
         pixels = x.tolist()
         us, vs = pixels[0::2], pixels[1::2]
         if u0 <= min(us) and max(us) <= u1 and v0 <= min(vs) and max(vs) <= v1:
@@ -817,11 +821,13 @@ class AdaptiveVisualTracker:
 
     def _count_frame(self, t, stamp):
         age = t - stamp
-        self.frames["applied"] += 1
-        self.frames["late"] += age > 1e-9
-        self.frames["age_sum"] += age
-        self.frames["age_max"] = max(self.frames["age_max"], age)
-        self.frames["last_age"] = age
+        frames = self.frames
+        frames["applied"] += 1
+        frames["late"] += age > 1e-9
+        frames["age_sum"] += age
+        if age > frames["age_max"]:
+            frames["age_max"] = age
+        frames["last_age"] = age
 
     def _step_predicted(self, t, q, qd, frame, stamp, problems):
         """Latency compensation: the law sees x_hat, the frame re-predicted to now.
@@ -852,8 +858,7 @@ class AdaptiveVisualTracker:
                 res, fast = self._fast_sample
                 if self.scale is not None:
                     self.scale.record(t, res[fast.speed])
-                self.predictor.commit(t, x_hat, res[fast.commit_rate].reshape(3, fast.m2),
-                                      applied)
+                self.predictor.commit_flat(t, x_hat, res[fast.commit_rate], applied)
             else:
                 rate = (self._model_rate
                         if result.status == "ok" and self._model_rate is not None

@@ -135,6 +135,7 @@ class BufferedFramePredictor(FramePredictor):
     def _allocate(self, capacity):
         self._times = np.empty(capacity)
         self._rates = np.empty((capacity, 3, self.m2))
+        self._rates_flat = self._rates.reshape(capacity, 3 * self.m2)     # a view
         self._history = np.empty((capacity, self.m2))
         self._has = np.zeros(capacity, dtype=np.bool_)
         self._start = self._end = 0
@@ -210,7 +211,9 @@ class BufferedFramePredictor(FramePredictor):
     def correct(self, stamp, x_frame, t):
         x_frame = np.asarray(x_frame, dtype=float)
         if stamp >= t - TIME_EPS:
-            return super().correct(stamp, x_frame, t)     # a frame of now: nothing to re-run
+            if self.gain >= 1.0 and self.drift_gain == 0.0:
+                return x_frame.copy()         # a frame of now resets: nothing to predict
+            return super().correct(stamp, x_frame, t)
         a, b = self._start, self._end
         i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
         drift = self._drift_array()
@@ -224,12 +227,16 @@ class BufferedFramePredictor(FramePredictor):
         return out
 
     def commit(self, t, x_hat, rate, applied_stamp=None):
+        self.commit_flat(t, x_hat, np.ravel(rate), applied_stamp)
+
+    def commit_flat(self, t, x_hat, rate, applied_stamp=None):
+        """:meth:`commit` with ``rate`` flat: J_perp q_dot, Z_dot, Z end to end (3 x 2m)."""
         end = self._end
         if end == self._times.shape[0]:
             self._make_room()
             end = self._end
         self._times[end] = t
-        self._rates[end] = rate
+        self._rates_flat[end] = rate
         if x_hat is None:
             self._has[end] = False
         else:
