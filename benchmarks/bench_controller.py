@@ -184,11 +184,21 @@ constants = dynamics.kernel_constants()
 t6 = time.perf_counter()
 dynamics_kernels.chain_regressor(*np.zeros((4, 3)), *constants)
 t7 = time.perf_counter()
-CompiledLaw(paper)
+law = CompiledLaw(paper)
 t8 = time.perf_counter()
+from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
+from visual_adaptive_servo.control.prediction_kernels import BufferedFramePredictor
+from visual_adaptive_servo.control.sample_kernels import CompiledSample
+from visual_adaptive_servo.control.trajectory import SinusoidTrajectory
+CompiledSample(law, paper, SinusoidTrajectory(np.zeros(2), np.ones(2), np.ones(2), 1.0))
+t9 = time.perf_counter()
+BufferedFramePredictor(0.2, 1.0, 0.0, 2)
+BufferedMotionScale(1.0, 1.0, 0.5, 2.0, 0.5, 0.2, 2)
+t10 = time.perf_counter()
 print(json.dumps({"import_numba_s": t1 - t0, "paper_kernel_s": t3 - t2,
                   "chain_kernel_s": t4 - t3, "csv_kernel_s": t5 - t4,
-                  "regressor_kernel_s": t7 - t6, "law_kernel_s": t8 - t7}))
+                  "regressor_kernel_s": t7 - t6, "law_kernel_s": t8 - t7,
+                  "sample_kernel_s": t9 - t8, "predictor_scale_kernels_s": t10 - t9}))
 """
 
 
@@ -277,13 +287,15 @@ def main(argv=None):
     if startup:
         print("\ncompiled backend start-up, fresh processes [s]:\n")
         print("| | import numba | paper kernel (+ numba's initialisation) | chain kernel "
-              "| csv kernels | chain Y_d kernel | control law kernel |")
-        print("|---|---:|---:|---:|---:|---:|---:|")
+              "| csv kernels | chain Y_d kernel | control law kernel | whole sample kernel "
+              "| predictor and motion scale kernels |")
+        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
         for name, run in startup.items():
             print(f"| {name.replace('_', ' ')} | {run['import_numba_s']:.2f} | "
                   f"{run['paper_kernel_s']:.2f} | {run['chain_kernel_s']:.2f} | "
                   f"{run['csv_kernel_s']:.2f} | {run['regressor_kernel_s']:.2f} | "
-                  f"{run['law_kernel_s']:.2f} |")
+                  f"{run['law_kernel_s']:.2f} | {run['sample_kernel_s']:.2f} | "
+                  f"{run['predictor_scale_kernels_s']:.2f} |")
     print("\ntargets (issue 18), compiled: the iiwa's step median <= 30 µs and p99 <= 80 µs, "
           "the paper's <= 10 µs; with a 30 Hz frame 33 ms late (--set sim_node.camera_rate=30 "
           "--set sim_node.camera_latency=0.033 at 1 ms joints), the step with the frame <= 60 µs")
