@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The late frame's re-run of :meth:`.prediction.FramePredictor.correct`, compiled with numba.
+"""The frame predictor on preallocated arrays, its steps compiled with numba.
 
 The numpy code of :class:`.prediction.FramePredictor` stays the reference.
 :class:`BufferedFramePredictor` is the same predictor with its buffer in
