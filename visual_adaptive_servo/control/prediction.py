@@ -102,12 +102,17 @@ class FramePredictor:
         if self.last_stamp is not None and stamp <= self.last_stamp + TIME_EPS:
             return (f"stamped {stamp:.6f} s, not after the last applied frame "
                     f"({self.last_stamp:.6f} s)")
-        if stamp < t - TIME_EPS and (not self.times or stamp < self.times[0] - TIME_EPS
+        oldest = self._oldest()
+        if stamp < t - TIME_EPS and (oldest is None or stamp < oldest - TIME_EPS
                                      or t - stamp > self.horizon + TIME_EPS):
-            oldest = f"{self.times[0]:.6f} s" if self.times else "none"
+            oldest = "none" if oldest is None else f"{oldest:.6f} s"
             return (f"stamped {stamp:.6f} s, {t - stamp:.3f} s old: older than the joint "
                     f"buffer (horizon {self.horizon:g} s, oldest sample {oldest})")
         return None
+
+    def _oldest(self):
+        """The time of the oldest sample in the buffer (None when it is empty)."""
+        return self.times[0] if self.times else None
 
     def _advance(self, x, dt, rate):
         jq, z_dot, z = rate

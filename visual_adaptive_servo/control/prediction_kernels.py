@@ -178,19 +178,8 @@ class BufferedFramePredictor(FramePredictor):
             return None
         return self._history[end - 1].copy()
 
-    def check_stamp(self, stamp, t):
-        if stamp > t + TIME_EPS:
-            return f"stamped {stamp:.6f} s, in the future of the joint sample at {t:.6f} s"
-        if self.last_stamp is not None and stamp <= self.last_stamp + TIME_EPS:
-            return (f"stamped {stamp:.6f} s, not after the last applied frame "
-                    f"({self.last_stamp:.6f} s)")
-        empty = self._end == self._start
-        if stamp < t - TIME_EPS and (empty or stamp < self._times[self._start] - TIME_EPS
-                                     or t - stamp > self.horizon + TIME_EPS):
-            oldest = "none" if empty else f"{self._times[self._start]:.6f} s"
-            return (f"stamped {stamp:.6f} s, {t - stamp:.3f} s old: older than the joint "
-                    f"buffer (horizon {self.horizon:g} s, oldest sample {oldest})")
-        return None
+    def _oldest(self):
+        return None if self._end == self._start else float(self._times[self._start])
 
     def _drift_array(self):
         drift = self.drift

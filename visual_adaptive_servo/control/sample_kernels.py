@@ -46,7 +46,7 @@ import numpy as np
 
 from ..models.kernels import chain_tensors, compiled, paper_tensors
 from .law_kernels import CHAIN, law, PAPER
-from .trajectory import BlendedStart, SinusoidTrajectory, TabulatedTrajectory
+from .trajectory import BlendedStart, quintic_blend, SinusoidTrajectory, TabulatedTrajectory
 
 #: trajectory kinds of :func:`sample`
 SINUSOID, TABLE = 0, 1
@@ -83,19 +83,8 @@ def _view3(a, ci, k):
     return a[o:o + d0 * d1 * d2].reshape(d0, d1, d2)
 
 
-@compiled(inline="always")
-def _quintic(tau):
-    """:func:`.trajectory.quintic_blend`."""
-    if tau <= 0.0:
-        return 0.0, 0.0, 0.0
-    if tau >= 1.0:
-        return 1.0, 0.0, 0.0
-    t2 = tau * tau
-    t3 = t2 * tau
-    sigma = t3 * (10.0 - 15.0 * tau + 6.0 * t2)
-    sigma_d = 30.0 * t2 * (1.0 - tau) ** 2
-    sigma_dd = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau)
-    return sigma, sigma_d, sigma_dd
+#: :func:`.trajectory.quintic_blend` compiled (the same function)
+_quintic = compiled(inline="always")(quintic_blend)
 
 
 @compiled(inline="always")
