@@ -372,7 +372,6 @@ class CompiledSample:
         self.error = slice(o_err, o_err + m2)
         self.speed = slice(o_speed, o_speed + m2)
         self.commit_rate = slice(o_rate, o_rate + 3 * m2)
-        self._model = model
         self._trajectory = trajectory
         if isinstance(trajectory, SinusoidTrajectory):
             self._trajectory_pieces = (SINUSOID, 0, trajectory._coefficients,
