@@ -31,7 +31,8 @@ import numpy as np
 
 from ..models.kernels import compiled
 from .motion_scale import MotionScale
-from .prediction import TIME_EPS
+from .prediction import first_kept, TIME_EPS
+from .prediction_kernels import make_room
 
 
 @compiled(inline="always")
@@ -183,10 +184,7 @@ class BufferedMotionScale(MotionScale):
                 np.ascontiguousarray(speed, dtype=float))
         self._end = end + 1
         if t - self._times[self._start] > 1.5 * self.horizon:
-            a = self._start
-            first = int(np.searchsorted(self._times[a:end + 1], t - self.horizon - TIME_EPS,
-                                        side="left")) - 1
-            self._start = a + max(first, 0)
+            self._start += first_kept(self._times[self._start:end + 1], t, self.horizon)
 
     def path_at(self, stamp):
         a, b = self._start, self._end
@@ -217,13 +215,4 @@ class BufferedMotionScale(MotionScale):
         return target
 
     def _make_room(self):
-        """Move the live samples to the front, or double the arrays when they fill them."""
-        a, b = self._start, self._end
-        live = b - a
-        times, path, speed = self._times, self._path, self._speed
-        if live > times.shape[0] // 2:
-            self._allocate(2 * times.shape[0])
-        self._times[:live] = times[a:b]
-        self._path[:live] = path[a:b]
-        self._speed[:live] = speed[a:b]
-        self._start, self._end = 0, live
+        make_room(self, ("_times", "_path", "_speed"))

@@ -195,7 +195,12 @@ def trim_buffers(times, t, horizon, *columns):
 
     ``times`` is increasing; each of ``columns`` is a list with one entry per time.
     """
-    first = max(bisect.bisect_left(times, t - horizon - TIME_EPS) - 1, 0)
+    first = first_kept(times, t, horizon)
     del times[:first]
     for column in columns:
         del column[:first]
+
+
+def first_kept(times, t, horizon):
+    """How many of the increasing ``times`` (a list or an array) :func:`trim_buffers` drops."""
+    return max(bisect.bisect_left(times, t - horizon - TIME_EPS) - 1, 0)

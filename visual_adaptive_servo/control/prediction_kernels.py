@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models.kernels import compiled
-from .prediction import FramePredictor, TIME_EPS
+from .prediction import first_kept, FramePredictor, TIME_EPS
 
 
 @compiled(error_model="numpy")
@@ -235,23 +235,23 @@ class BufferedFramePredictor(FramePredictor):
         if applied_stamp is not None:
             self.last_stamp = applied_stamp
         if t - self._times[self._start] > 1.5 * self.horizon:
-            # trim_buffers: keep the last sample at or before t - horizon
-            a, b = self._start, self._end
-            first = int(np.searchsorted(self._times[a:b], t - self.horizon - TIME_EPS,
-                                        side="left")) - 1
-            self._start = a + max(first, 0)
+            self._start += first_kept(self._times[self._start:self._end], t, self.horizon)
 
     def _make_room(self):
-        """Move the live samples to the front, or double the arrays when they fill them."""
-        a, b = self._start, self._end
-        live = b - a
-        times, rates, history, has = self._times, self._rates, self._history, self._has
-        if live > times.shape[0] // 2:
-            self._allocate(2 * times.shape[0])
-        else:
-            self._start = self._end = 0
-        self._times[:live] = times[a:b]
-        self._rates[:live] = rates[a:b]
-        self._history[:live] = history[a:b]
-        self._has[:live] = has[a:b]
-        self._start, self._end = 0, live
+        make_room(self, ("_times", "_rates", "_history", "_has"))
+
+
+def make_room(buffer, names):
+    """Move a buffer's live samples to the front of its arrays, or double them when full.
+
+    ``buffer`` keeps its samples in the arrays named ``names`` (rows ``_start`` to
+    ``_end``) and makes them with ``_allocate(capacity)``.
+    """
+    a, b = buffer._start, buffer._end
+    live = b - a
+    arrays = [getattr(buffer, name) for name in names]
+    if live > arrays[0].shape[0] // 2:
+        buffer._allocate(2 * arrays[0].shape[0])
+    for name, array in zip(names, arrays):
+        getattr(buffer, name)[:live] = array[a:b]
+    buffer._start, buffer._end = 0, live
