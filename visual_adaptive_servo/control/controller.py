@@ -952,13 +952,7 @@ class AdaptiveVisualTracker:
         self.desired = desired
         self.state, self.rates, self.t_last = state, out.rates, t
         self.e_int, self._xd_last = e_int, xd
-        if with_frame:
-            self.t_last_feature = t
-        self.stale = False
-        if self._rejecting:
-            log.info("input valid again at t=%.4f", t)
-            self._rejecting = ()
-        self.last_tau, self.t_last_tau = tau, t
+        self._accepted(t, with_frame, tau)
         fast = self._compiled_sample()
         if fast is not None:
             # what the next sample, compiled, reads of this one
@@ -972,6 +966,20 @@ class AdaptiveVisualTracker:
             "saturated": saturated, "projection_active": out.projection_active,
             "damped": out.damped, "sigma_min": out.sigma_min, "tau_unsaturated": out.tau,
             "flags": {}, "motion_scale": self._scale_value})
+
+    def _accepted(self, t, with_frame, tau):
+        """Commit what every accepted sample does besides the state.
+
+        The frame's time, the camera's and the rejections' flags, and the command the
+        safety fallback holds.
+        """
+        if with_frame:
+            self.t_last_feature = t
+        self.stale = False
+        if self._rejecting:
+            log.info("input valid again at t=%.4f", t)
+            self._rejecting = ()
+        self.last_tau, self.t_last_tau = tau, t
 
     def _sample_compiled(self, fast, t, q, qd, x, with_frame):
         """:meth:`_sample` of a sample that does not restart, in one compiled call.
@@ -1009,15 +1017,9 @@ class AdaptiveVisualTracker:
         self._model_rate = None         # the predictor's rate is in res (_step_predicted)
         self._fast_prev, self._fast_layout, self._fast_sample = res, fast, (res, fast)
         self.state, self._rates, self._e_int, self._xd, self.t_last = state, None, None, None, t
-        if with_frame:
-            self.t_last_feature = t
-        self.stale = False
-        if self._rejecting:
-            log.info("input valid again at t=%.4f", t)
-            self._rejecting = ()
         unsaturated = res[fast.tau_unsaturated]
         tau = res[fast.tau] if saturated else unsaturated     # as _sample: the same array
-        self.last_tau, self.t_last_tau = tau, t
+        self._accepted(t, with_frame, tau)
         return _frozen(StepResult, {
             "t": t, "tau": tau, "x_d": res[fast.xd], "x_obs": res[fast.x_obs],
             "error": res[fast.error], "z_hat": res[fast.z_hat], "state": state, "status": "ok",
@@ -1027,38 +1029,27 @@ class AdaptiveVisualTracker:
 
     # the rates, the integral and x_d of the last accepted sample: a compiled sample keeps
     # them in its array only (the attributes None), read from there when asked for
-    @property
-    def rates(self):
-        """The adaptation rates of the last accepted sample (an EstimatorState), or None."""
-        if self._rates is None and self._fast_prev is not None:
-            res, fast = self._fast_prev, self._fast_layout
-            self._rates = EstimatorState.from_flat(res[fast.rates], fast.state_ends)
-        return self._rates
+    def _last(self, attribute, part):
+        """``attribute``, from the last compiled sample's array (its slice ``part``) if None.
 
-    @rates.setter
-    def rates(self, value):
-        self._rates = value
+        Without a compiled sample the value stays None.
+        """
+        value = self.__dict__[attribute]
+        if value is None and self._fast_prev is not None:
+            value = self._fast_prev[getattr(self._fast_layout, part)]
+            if part == "rates":
+                value = EstimatorState.from_flat(value, self._fast_layout.state_ends)
+            self.__dict__[attribute] = value
+        return value
 
-    @property
-    def e_int(self):
-        """The reference's integral of x_o - x_d (zero when reference.integral_rate is 0)."""
-        if self._e_int is None:
-            self._e_int = self._fast_prev[self._fast_layout.e_int]
-        return self._e_int
-
-    @e_int.setter
-    def e_int(self, value):
-        self._e_int = value
-
-    @property
-    def _xd_last(self):
-        if self._xd is None and self._fast_prev is not None:
-            self._xd = self._fast_prev[self._fast_layout.xd]
-        return self._xd
-
-    @_xd_last.setter
-    def _xd_last(self, value):
-        self._xd = value
+    #: the adaptation rates of the last accepted sample (an EstimatorState), or None
+    rates = property(lambda self: self._last("_rates", "rates"),
+                     lambda self, value: setattr(self, "_rates", value))
+    #: the reference's integral of x_o - x_d (zero when reference.integral_rate is 0)
+    e_int = property(lambda self: self._last("_e_int", "e_int"),
+                     lambda self, value: setattr(self, "_e_int", value))
+    _xd_last = property(lambda self: self._last("_xd", "xd"),
+                        lambda self, value: setattr(self, "_xd", value))
 
     def _compiled_sample(self):
         """The :class:`~.sample_kernels.CompiledSample` of this tracker, or None.

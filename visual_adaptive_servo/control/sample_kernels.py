@@ -88,6 +88,16 @@ _quintic = compiled(inline="always")(quintic_blend)
 
 
 @compiled(inline="always")
+def _block(block, m2, pp, pz, pd):
+    """(start in the state, size, start of its minima in the bounds) of estimate block 0-2.
+
+    The blocks are a_z_perp, a_z, a_d; a block's maxima follow its minima in the bounds.
+    """
+    offset = 0 if block == 0 else pp if block == 1 else pp + pz
+    return m2 + offset, (pp if block == 0 else pz if block == 1 else pd), 2 * offset
+
+
+@compiled(inline="always")
 def _desired(cf, ci, sizes, blend, t, xd, xd_dot, xd_ddot):
     """x_d(t) and its two derivatives: the trajectory's ``__call__``, then BlendedStart's."""
     m2 = xd.shape[0]
@@ -203,9 +213,7 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
         inside = True
         # the estimates a_z_perp, a_z, a_d follow x_obs in the state; bounds per block
         for block in range(3):
-            first = m2 + (0 if block == 0 else pp if block == 1 else pp + pz)
-            count = pp if block == 0 else pz if block == 1 else pd
-            lo_at = 2 * (first - m2)
+            first, count, lo_at = _block(block, m2, pp, pz, pd)
             for p in range(count):
                 lo, hi = bounds[lo_at + p], bounds[lo_at + count + p]
                 if math.isfinite(lo) or math.isfinite(hi):
@@ -222,9 +230,7 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
         if not inside:
             project = True
             for block in range(3):
-                first = m2 + (0 if block == 0 else pp if block == 1 else pp + pz)
-                count = pp if block == 0 else pz if block == 1 else pd
-                lo_at = 2 * (first - m2)
+                first, count, lo_at = _block(block, m2, pp, pz, pd)
                 for p in range(count):
                     # np.clip: NaN stays NaN
                     v = state[first + p]
