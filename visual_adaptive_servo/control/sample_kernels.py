@@ -62,7 +62,7 @@ _INT = ("frame", "prismatic", "z_index", "perp_index", "columns", "sizes")
     len(_FLOAT), len(_FLOAT) + len(_INT))
 #: entries of the "sizes" piece
 (_NS, _LAW_SIZE, _P_PERP, _P_Z, _P_D, _KIND, _HAS_W0, _TRAJECTORY, _PERIODIC, _PROJECT,
- _INTEGRAL) = range(11)
+ _INTEGRAL, _O_TAU, _O_XD, _O_EINT, _O_ERR, _O_SPEED, _O_RATE) = range(17)
 
 
 @compiled(inline="always")
@@ -175,14 +175,10 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
     m = m2 // 2
     ns, size = sizes[_NS], sizes[_LAW_SIZE]
     pp, pz, pd = sizes[_P_PERP], sizes[_P_Z], sizes[_P_D]
-    # the layout of CompiledSample
+    # the layout of CompiledSample (the law's output follows the state)
     o_out = ns
-    o_tau = o_out + size
-    o_xd = o_tau + n
-    o_eint = o_xd + 3 * m2
-    o_err = o_eint + m2
-    o_speed = o_err + m2
-    o_rate = o_speed + m2
+    o_tau, o_xd, o_eint = sizes[_O_TAU], sizes[_O_XD], sizes[_O_EINT]
+    o_err, o_speed, o_rate = sizes[_O_ERR], sizes[_O_SPEED], sizes[_O_RATE]
     state = res[:ns]
     # EstimatorState.advanced: x + dt x_dot, the rates at the last sample (law output rates)
     for i in range(ns):
@@ -365,6 +361,7 @@ class CompiledSample:
         o_speed = o_err + m2
         o_rate = o_speed + m2
         self.size = o_rate + 3 * m2
+        self._offsets = [o_tau, o_xd, o_eint, o_err, o_speed, o_rate]
         self.state = slice(0, ns)
         self.x_obs = slice(0, m2)
         self.out = slice(o_out, o_tau)
@@ -445,7 +442,7 @@ class CompiledSample:
         joints, columns = law.chain
         kind, periodic, coef, knots, x_end, traj_scalars = self._trajectory_pieces
         sizes = [self.ns, law._size, *law.sizes, self._kind, int(bool(self._has_w0)), kind,
-                 periodic, int(project), int(integral)]
+                 periodic, int(project), int(integral), *self._offsets]
         floats = [self._A, self._B, self._C, self._axes, self._revolute, self._dirs,
                   self._moves, self._known, flat, bounds, scalars, joints,
                   np.broadcast_to(np.asarray(torque_limit, dtype=float), (self.n,)), coef,
@@ -489,9 +486,3 @@ class CompiledSample:
                    np.zeros(m2), 1.0, 0.001, 1.0, 0.0)
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
-
-    def __call__(self, prev, q, qd, x, t, dt, s, s_dot):
-        """(res, finite, sigma_min, damped, projection_active, saturated) of one sample."""
-        res = np.empty(self.size)
-        return (res, *sample(self.cf, self.ci, self.blend, prev, res, q, qd, x, t, dt, s,
-                             s_dot))
