@@ -166,6 +166,25 @@ def test_derived_bandwidths_follow_the_camera_and_keep_theorem_1():
     np.testing.assert_allclose(slow.inertia_rate(), 200.0)
 
 
+def _derived_gamma_d(path, overrides=()):
+    scenario = load_scenario(path, overrides)
+    tracker = AdaptiveVisualTracker(scenario.controller)
+    tracker.start(scenario.sim.initial_positions)
+    return tracker.gains.gamma, np.asarray(tracker.gains.Gamma_d)
+
+
+@pytest.mark.parametrize("rate", [0.0, 30.0])
+def test_the_dynamic_adaptation_rate_is_capped_whatever_gamma(tmp_path, rate):
+    # normalized_gain is linear in its rate, so the capped Gamma_d is the uncapped one
+    # times cap / (dynamic_rate gamma) when that is below 1, and the same otherwise
+    path = write_scenario(tmp_path, rate=rate, latency=0.033 if rate else 0.0)
+    gamma, capped = _derived_gamma_d(path)
+    _, free = _derived_gamma_d(path, ("controller_node.gain_design.dynamic_rate_max=1e9",))
+    factor = min(1.0, 1.0 / (0.3 * gamma))
+    assert (factor < 1.0) == (rate == 0.0)     # gamma 20 with a frame every sample, ~3 at 30 Hz
+    np.testing.assert_allclose(capped, free * factor, rtol=1e-12)
+
+
 def test_a_scalar_stands_for_a_whole_diagonal(tmp_path):
     path = write_scenario(tmp_path)
     scenario = load_scenario(path, ("controller_node.Gamma_z_perp=180",

@@ -92,6 +92,41 @@ def test_the_smoothing_is_the_exact_solution_of_its_derivative():
     assert log(sc.value) == pytest.approx(log(3.0) * (1 - exp(-2.0 * t)), rel=1e-9)
 
 
+@pytest.mark.parametrize("buffered", [False, True])
+def test_the_scale_starts_and_restarts_at_its_initial_value(buffered):
+    if buffered:
+        pytest.importorskip("numba")
+        from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
+        sc = BufferedMotionScale(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, 4, initial=2.0)
+    else:
+        sc = MotionScale(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, initial=2.0)
+    assert sc.value == sc.target == 2.0 and sc.derivative == 0.0
+    sc.advance(0.5)                                   # nothing learnt: s stays where it starts
+    assert sc.value == 2.0
+    sc.target = 3.0
+    sc.advance(0.5)
+    assert 2.0 < sc.value < 3.0
+    other = sc.to_lists() if buffered else type(sc)(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, 2.0)
+    assert other.initial == 2.0
+    sc.reset()
+    assert sc.value == sc.target == 2.0
+
+
+def test_an_initial_scale_outside_its_bounds_is_refused():
+    from visual_adaptive_servo.config.scenario import load_scenario
+    from visual_adaptive_servo.schema import ConfigError
+
+    base = "config/paper_3dof_urdf.yaml"
+    assert load_scenario(base).controller["motion_scale.initial"] == 1.0
+    assert load_scenario(base, ("controller_node.motion_scale.initial=2.5",)).controller[
+        "motion_scale.initial"] == 2.5
+    with pytest.raises(ConfigError, match=r"motion_scale\.initial: must be within "
+                                          r"\[motion_scale\.lower, motion_scale\.upper\] = "
+                                          r"\[0\.2, 1\.5\], got 2\.0"):
+        load_scenario(base, ("controller_node.motion_scale.upper=1.5",
+                             "controller_node.motion_scale.initial=2.0"))
+
+
 def test_old_or_repeated_frames_are_ignored():
     sc = MotionScale(1.0, 1.0, 0.2, 5.0, 0.0, horizon=0.5)
     assert sc.frame(0.0, np.zeros(4)) is None           # no joint sample yet

@@ -90,6 +90,9 @@ CONTROLLER_PARAMS = (
               "(regressor-normalised, docs/gain_design.md).", 0.0, 10.0),
     ParamSpec("gain_design.dynamic_rate", 0.3, "float",
               "Derived Gamma_d: the dynamic estimates converge at this x gamma.", 0.0, 10.0),
+    ParamSpec("gain_design.dynamic_rate_max", 1.0, "float",
+              "Derived Gamma_d: at most this convergence rate [1/s], whatever gamma "
+              "(docs/gain_design.md).", 0.0, None),
     ParamSpec("gain_design.excitation_floor", 1e-3, "float",
               "Derived adaptation gains: a regressor column counts as carrying at least this "
               "fraction of the strongest column's energy (its gain at most 1/this times the "
@@ -229,6 +232,9 @@ CONTROLLER_PARAMS = (
               "How fast s follows the regression [1/s].", 1e-3, 100.0),
     ParamSpec("motion_scale.lower", 0.2, "float", "Lower bound of s.", 1e-3, 1.0),
     ParamSpec("motion_scale.upper", 5.0, "float", "Upper bound of s.", 1.0, 1e3),
+    ParamSpec("motion_scale.initial", 1.0, "float",
+              "s before the scale is first learnt (and after a reset), within [lower, upper] "
+              "(docs/robust_adaptation.md).", 1e-3, 1e3),
     ParamSpec("motion_scale.min_motion", 1.0, "float",
               "RMS per image coordinate the predicted path must move within the window before "
               "s is learnt [px].", 0.0, None),
@@ -321,6 +327,11 @@ class ControllerConfig(ValidatedParams):
             raise ConfigError(f"{section}.torque_limit: every entry must be > 0, "
                               f"got {list(v['torque_limit'])}")
         check_alpha_gamma(v["alpha"], v["gamma"], section)
+        lower, upper = v["motion_scale.lower"], v["motion_scale.upper"]
+        if not lower <= v["motion_scale.initial"] <= upper:
+            raise ConfigError(f"{section}.motion_scale.initial: must be within "
+                              f"[motion_scale.lower, motion_scale.upper] = [{lower}, {upper}], "
+                              f"got {v['motion_scale.initial']}")
         check_image_bounds(v, section)
         if v["safety.fallback"] not in FALLBACKS:
             raise ConfigError(f"{section}.safety.fallback: must be one of {FALLBACKS}, "

@@ -672,7 +672,8 @@ class AdaptiveVisualTracker:
                                         config["drift_gain"])
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
                                   config["motion_scale.lower"], config["motion_scale.upper"],
-                                  config["motion_scale.min_motion"], config["max_frame_age"])
+                                  config["motion_scale.min_motion"], config["max_frame_age"],
+                                  config["motion_scale.initial"])
                       if config["motion_scale.enabled"] and self.compensate else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
@@ -1167,7 +1168,7 @@ class AdaptiveVisualTracker:
         if self.scale is not None:
             departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
-                              f"{self.scale.upper:g}])")
+                              f"{self.scale.upper:g}], initial {self.scale.initial:g})")
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,

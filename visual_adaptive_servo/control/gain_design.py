@@ -29,7 +29,8 @@ Nothing reads the true parameters.
   discretised velocity loop (period-2 oscillation past 1, divergence past 2).
 * K.  The largest scalar with J*^T K J* <= ``K_fraction`` D at q0: the image-space
   feedback Theorem 1 needs, never more damping than a fraction of D.
-* Adaptation gains of eqs (23)-(25).  For a regressor Y driving an estimate
+* Adaptation gains of eqs (23)-(25), at rates proportional to gamma (eq (23)'s
+  at most ``dynamic_rate_max``).  For a regressor Y driving an estimate
   error a~ through a gradient law, a~_dot ~ -Gamma G a~ with G the regressor's
   Gram matrix over typical motions.  Gamma = rate / (lambda_max(C) diag(G)),
   C the Gram matrix with unit diagonal, gives the best-excited direction the
@@ -50,7 +51,8 @@ import numpy as np
 DESIGNED = ("K", "Gamma_d", "Gamma_z_perp", "Gamma_z")
 #: the ``gain_design.*`` parameters, in the order of :class:`DesignSettings`' fields
 DESIGN_NAMES = ("delay_bandwidth", "gamma_max", "observer_ratio", "damping_per_sample",
-                "K_fraction", "kinematic_rate", "dynamic_rate", "excitation_floor")
+                "K_fraction", "kinematic_rate", "dynamic_rate", "excitation_floor",
+                "dynamic_rate_max")
 #: joint-velocity samples drawn for the Gram matrices (fixed seed: the design is repeatable)
 DESIGN_SAMPLES = 64
 DESIGN_SEED = 20150101
@@ -74,6 +76,7 @@ class DesignSettings:
     kinematic_rate: float       # eqs (24), (25): convergence rate / gamma
     dynamic_rate: float         # eq (23): convergence rate / gamma
     excitation_floor: float     # a column's energy counts as at least this x the strongest's
+    dynamic_rate_max: float = float("inf")   # eq (23): at most this convergence rate [1/s]
 
     @classmethod
     def from_values(cls, values):
@@ -203,7 +206,10 @@ def design_gains(model, settings, state, q0, trajectory, D=None, alpha=None, gam
     floor = settings.excitation_floor
     Gamma_z_perp = normalized_gain(G_perp / DESIGN_SAMPLES, kin_rate, floor) * alpha * z_mean
     Gamma_z = normalized_gain(G_z / DESIGN_SAMPLES, kin_rate, floor) * alpha * z_mean
-    Gamma_d = (normalized_gain(G_d / DESIGN_SAMPLES, settings.dynamic_rate * gamma, floor)
+    # eq (23)'s rate follows gamma up to a cap: pixel noise reaches Y_d through q_ddot_r
+    # (gamma alpha times the noise), so a fast camera's gamma must not speed it up unbounded
+    dyn_rate = min(settings.dynamic_rate * gamma, settings.dynamic_rate_max)
+    Gamma_d = (normalized_gain(G_d / DESIGN_SAMPLES, dyn_rate, floor)
                if D_inv is not None else None)
     return DesignedGains(alpha, gamma, K, Gamma_z_perp, Gamma_z, Gamma_d)
 

@@ -65,19 +65,25 @@ class MotionScale:
         window before the regression is trusted [px].
     horizon : float
         How far back a frame may be captured (the path buffer keeps this much) [s].
+    initial : float
+        s before the first trusted regression, and after a reset.  Above 1 the
+        loop starts slower than designed: a guessed camera whose image motion is
+        too slow makes the loop faster than designed, past the observer, which
+        one too fast cannot (docs/robust_adaptation.md).
     """
 
-    def __init__(self, window, rate, lower, upper, min_motion, horizon):
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, initial=1.0):
         self.window = float(window)
         self.rate = float(rate)
         self.lower, self.upper = float(lower), float(upper)
         self.min_motion = float(min_motion)
         self.horizon = float(horizon)
+        self.initial = float(initial)
         self.reset()
 
     def reset(self):
-        self.value = 1.0            # s
-        self.target = 1.0           # the regression's value, once trusted
+        self.value = self.initial   # s
+        self.target = self.initial  # the regression's value, once trusted
         # per joint sample (lists of Python floats: 2m = 2 to 6 values, for which each numpy
         # call costs more than its arithmetic; called at every joint sample and frame)
         self.times = []             # joint-sample times of the path

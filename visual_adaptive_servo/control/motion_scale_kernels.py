@@ -117,10 +117,11 @@ def _record(times, path, speed, start, end, t, v):
 class BufferedMotionScale(MotionScale):
     """:class:`.motion_scale.MotionScale` with its path on arrays and its regression compiled."""
 
-    def __init__(self, window, rate, lower, upper, min_motion, horizon, m2, capacity=512):
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, m2, capacity=512,
+                 initial=1.0):
         self.m2 = int(m2)
         self._capacity = int(capacity)
-        super().__init__(window, rate, lower, upper, min_motion, horizon)
+        super().__init__(window, rate, lower, upper, min_motion, horizon, initial)
         self._warm_up()
 
     def _warm_up(self):
@@ -133,8 +134,8 @@ class BufferedMotionScale(MotionScale):
 
     def reset(self):
         # MotionScale.reset's lists are the arrays here; sums is None or the (4, 2m) array
-        self.value = 1.0
-        self.target = 1.0
+        self.value = self.initial
+        self.target = self.initial
         self.weight = 0.0
         self.sums = None
         self.t_frame = None
@@ -150,7 +151,7 @@ class BufferedMotionScale(MotionScale):
     def of(cls, scale, m2):
         """The buffered scale with the state of a list-based one."""
         new = cls(scale.window, scale.rate, scale.lower, scale.upper, scale.min_motion,
-                  scale.horizon, m2, max(512, 2 * len(scale.times)))
+                  scale.horizon, m2, max(512, 2 * len(scale.times)), scale.initial)
         n = len(scale.times)
         new._times[:n] = scale.times
         if n:
@@ -165,7 +166,7 @@ class BufferedMotionScale(MotionScale):
     def to_lists(self):
         """The list-based :class:`.motion_scale.MotionScale` with this state."""
         other = MotionScale(self.window, self.rate, self.lower, self.upper, self.min_motion,
-                            self.horizon)
+                            self.horizon, self.initial)
         a, b = self._start, self._end
         other.times = self._times[a:b].tolist()
         other.path = self._path[a:b].tolist()
