@@ -67,9 +67,9 @@ class MotionScale:
         How far back a frame may be captured (the path buffer keeps this much) [s].
     initial : float
         s before the first trusted regression, and after a reset.  Above 1 the
-        loop starts slower than designed: a guessed camera whose image motion is
-        too slow makes the loop faster than designed, past the observer, which
-        one too fast cannot (docs/robust_adaptation.md).
+        loop starts slower than designed: that helps when the guessed camera's
+        image motion is too slow (the loop would run past its observer) and costs
+        an observer lag when the guess is right (docs/robust_adaptation.md).
     """
 
     def __init__(self, window, rate, lower, upper, min_motion, horizon, initial=1.0):
