@@ -82,13 +82,17 @@ class MotionScale:
         self.reset()
 
     def reset(self):
-        self.value = self.initial   # s
-        self.target = self.initial  # the regression's value, once trusted
+        self._reset_fit()
         # per joint sample (lists of Python floats: 2m = 2 to 6 values, for which each numpy
         # call costs more than its arithmetic; called at every joint sample and frame)
         self.times = []             # joint-sample times of the path
         self.path = []              # P at those times, (2m,) each
         self.speed = []             # the unscaled model rate there, (2m,) each
+
+    def _reset_fit(self):
+        """s, the regression's value and its sums back to the start (not the path)."""
+        self.value = self.initial   # s
+        self.target = self.initial  # the regression's value, once trusted
         self.weight = 0.0           # the frames' total weight w in the regression
         self.sums = None            # weighted sums (x, P, xP, PP) of the regression, 4 x (2m,)
         self.t_frame = None         # capture time of the last frame in the sums

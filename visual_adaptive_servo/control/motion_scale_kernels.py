@@ -134,11 +134,7 @@ class BufferedMotionScale(MotionScale):
 
     def reset(self):
         # MotionScale.reset's lists are the arrays here; sums is None or the (4, 2m) array
-        self.value = self.initial
-        self.target = self.initial
-        self.weight = 0.0
-        self.sums = None
-        self.t_frame = None
+        self._reset_fit()
         self._allocate(self._capacity)
 
     def _allocate(self, capacity):
