@@ -204,6 +204,21 @@ def test_start_refuses_a_damping_past_the_sampled_data_bound(tmp_path):
         tracker.start(scenario.sim.initial_positions)
 
 
+def test_start_report_says_in_words_when_the_sampled_data_step_cannot_be_checked():
+    # the paper's file starts with a_d_init of zeros but for one entry: M_hat is singular
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    scenario = load_scenario(os.path.join(root, "config", "paper_3dof.yaml"))
+    report = AdaptiveVisualTracker(scenario.controller).start(scenario.sim.initial_positions)
+    assert np.isnan(report.margin)
+    step = [line for line in report.lines() if line.startswith("sampled-data step")]
+    assert step == [step[0]] and "not checked" in step[0] and "nan" not in step[0]
+    # with a positive definite estimate the figures are printed
+    scenario = load_scenario(os.path.join(root, "config", "iiwa_3points.yaml"))
+    report = AdaptiveVisualTracker(scenario.controller).start(scenario.sim.initial_positions)
+    step = [line for line in report.lines() if line.startswith("sampled-data step")][0]
+    assert np.isfinite(report.margin) and f"{report.margin:.3g}" in step
+
+
 def test_start_refuses_a_guessed_camera_behind_the_points(tmp_path):
     scenario = load_scenario(write_scenario(tmp_path))
     values = dict(scenario.controller.params)

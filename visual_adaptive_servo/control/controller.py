@@ -580,9 +580,14 @@ class StartReport:
                    f"{self.sigma_max:.4g} px m/rad")
         out.append("estimated depths: " + ", ".join(f"{z:.3f}" for z in self.z_hat.tolist())
                    + " m")
-        per_joint = zip(self.joint_names, self.margin_joint.tolist())
-        out.append(f"sampled-data step (T M_hat^-1 B): {self.margin:.3g}; per joint "
-                   + ", ".join(f"{name} {rho:.3g}" for name, rho in per_joint))
+        if np.isfinite(self.margin):
+            per_joint = zip(self.joint_names, self.margin_joint.tolist())
+            out.append(f"sampled-data step (T M_hat^-1 B): {self.margin:.3g}; per joint "
+                       + ", ".join(f"{name} {rho:.3g}" for name, rho in per_joint))
+        else:
+            out.append("sampled-data step (T M_hat^-1 B): not checked, the initial estimate's "
+                       "inertia M_hat is not positive definite (initial_estimate.a_d gives the "
+                       "arm no mass)")
         out.append("departures from the paper (docs/robust_adaptation.md): "
                    + (", ".join(self.departures) if self.departures else "none"))
         return out
