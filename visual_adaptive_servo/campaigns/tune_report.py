@@ -189,6 +189,10 @@ def _changes(space, best_params, base_values, values):
     return comments, lines
 
 
+#: a held-out p90 above this ratio of the file's is no clear gain (neither diverging)
+TIE_RATIO = 0.95
+
+
 def _verdict(held_out, best, values):
     if best is None:
         return ("No trial finished without a divergence in its first runs: no gains to "
@@ -204,10 +208,15 @@ def _verdict(held_out, best, values):
     figures = (f"held-out: tuned {tuned['diverged']} of {tuned['runs']} diverged, p90 true RMS "
                f"{_fmt(tuned['p90_true_rms_px'])} px; the file's {file['diverged']} of "
                f"{file['runs']} diverged, p90 {_fmt(file['p90_true_rms_px'])} px")
+    ratio = None
     if not tuned["diverged"] and not file["diverged"] and file["p90_true_rms_px"] > 0.0:
         ratio = tuned["p90_true_rms_px"] / file["p90_true_rms_px"]
         figures += f"; the tuned p90 is {ratio:.2f}x the file's"
     which = f"The tuned gains (trial {best.number})"
+    if tuned["objective"] < file["objective"] and ratio is not None and ratio > TIE_RATIO:
+        return (f"{which} are NOT clearly better than the file's on the held-out runs "
+                f"({figures}; within {1.0 - TIE_RATIO:.0%}): keep the file's gains, or tune "
+                "with more trials or runs.")
     if tuned["objective"] < file["objective"]:
         return f"{which} are better on the held-out runs ({figures})."
     return (f"{which} are NOT better than the file's on the held-out runs ({figures}): keep "
