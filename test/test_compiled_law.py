@@ -44,8 +44,9 @@ from test_compiled_tensors import reference_of
 from test_urdf_kinematics import SYNTHETIC
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import (_flat_law_output, _law_output,
-                                                      AdaptiveVisualTracker, control_law,
-                                                      EstimatorState, Leakage, Projection)
+                                                      _NO_PIXELS, AdaptiveVisualTracker,
+                                                      control_law, EstimatorState, InputError,
+                                                      Leakage, Projection, validate_vector)
 from visual_adaptive_servo.control.motion_scale import MotionScale
 from visual_adaptive_servo.control.prediction import FramePredictor
 from visual_adaptive_servo.control.trajectory import BlendedStart
@@ -61,7 +62,8 @@ from visual_adaptive_servo.control.motion_scale_kernels import (  # noqa: E402  
     BufferedMotionScale)
 from visual_adaptive_servo.control.prediction_kernels import (  # noqa: E402  (numba)
     BufferedFramePredictor)
-from visual_adaptive_servo.control.sample_kernels import CompiledSample  # noqa: E402  (numba)
+from visual_adaptive_servo.control.sample_kernels import (  # noqa: E402  (numba)
+    CompiledSample, inputs_valid)
 from visual_adaptive_servo.models import dynamics_kernels  # noqa: E402  (needs numba)
 
 CONFIGS = ["paper_3dof.yaml", "paper_3dof_urdf.yaml", "iiwa_3points.yaml", "panda_2points.yaml"]
@@ -387,6 +389,82 @@ def test_tracker_follows_the_models_backend():
     finally:
         config.model.set_backend("compiled")
     assert tracker._compiled_law() is not None
+
+
+def reference_verdict(tracker, q, qd, x):
+    """None when the tracker's reference checks pass q, q_dot and x, else their message."""
+    n = tracker.model.n
+    try:
+        validate_vector("joint positions q", q, n)
+        validate_vector("joint velocities qd", qd, n)
+        if x is not None:
+            tracker._check_feature(x)
+    except InputError as exc:
+        return str(exc)
+    return None
+
+
+def test_the_compiled_input_check_agrees_with_the_reference_checks(rng):
+    """inputs_valid passes exactly what validate_vector and _check_feature pass."""
+    config = load_scenario(os.path.join(ROOT, "config", "iiwa_3points.yaml")).controller
+    tracker = AdaptiveVisualTracker(config)
+    n, m2 = tracker.model.n, 2 * tracker.model.m
+    u0, u1, v0, v1 = config["image_bounds"].tolist()
+    limits = np.array([n, m2, u0, u1, v0, v1])
+    no_frame = np.array([n, 0.0, u0, u1, v0, v1])
+    bad_values = [np.nan, np.inf, -np.inf]
+    verdicts = {True: 0, False: 0}
+    for trial in range(600):
+        q, qd = rng.normal(size=n), rng.normal(size=n)
+        x = np.column_stack([rng.uniform(u0, u1, m2 // 2),
+                             rng.uniform(v0, v1, m2 // 2)]).ravel()
+        kind = trial % 6
+        if kind == 1:       # a NaN or an infinity in one of them
+            vector = (q, qd, x)[rng.integers(3)]
+            vector[rng.integers(vector.size)] = rng.choice(bad_values)
+        elif kind == 2:     # a point just outside (or on) an image border
+            i = rng.integers(m2)
+            low, high = (u0, u1) if i % 2 == 0 else (v0, v1)
+            x[i] = rng.choice([low, high]) + rng.choice([-1e-9, 0.0, 1e-9])
+        elif kind == 3:     # a wrong size
+            which = rng.integers(3)
+            q, qd, x = [np.append(v, 1.0) if k == which else v for k, v in enumerate((q, qd, x))]
+        elif kind == 4:
+            x = None
+        elif kind == 5 and trial % 12 == 5:
+            x = x[:-2]
+        reference = reference_verdict(tracker, q, qd, x)
+        compiled = (inputs_valid(q, qd, _NO_PIXELS, no_frame) if x is None
+                    else inputs_valid(q, qd, x, limits))
+        assert compiled == (reference is None), (q, qd, x, reference)
+        verdicts[compiled] += 1
+    assert min(verdicts.values()) > 100     # both verdicts well exercised
+
+
+@pytest.mark.parametrize("convert", [
+    list, lambda v: np.repeat(v, 2)[::2], lambda v: np.frombuffer(v.tobytes())],
+    ids=["list", "strided", "read-only"])
+def test_inputs_the_compiled_check_does_not_take_go_through_the_reference_checks(convert):
+    """A list, a strided view or a read-only buffer: the same run as contiguous arrays.
+
+    The compiled check refuses them (TypeError, no specialisation compiled) and the
+    reference checks convert them, so the commands are the same to the bit.
+    """
+    config = load_scenario(os.path.join(ROOT, "config", "paper_3dof.yaml")).controller
+    samples = []
+    plain, other = AdaptiveVisualTracker(config), AdaptiveVisualTracker(config)
+    q, qd = np.array([1.0807, 0.5756, -0.5]), np.zeros(3)
+    for k in range(20):
+        x = config.model.project(q)[0]
+        samples.append((0.005 * k, q, qd, x))
+        q = q + 0.001
+    signatures = len(inputs_valid.signatures)
+    for t, q, qd, x in samples:
+        a = plain.step(t, q, qd, x)
+        b = other.step(t, convert(q), convert(qd), convert(x))
+        assert a.status == b.status == "ok" and not b.problems
+        np.testing.assert_array_equal(b.tau, a.tau)
+    assert len(inputs_valid.signatures) == signatures == 1
 
 
 # -- the dynamic regressors ------------------------------------------------------------------

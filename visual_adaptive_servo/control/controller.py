@@ -44,6 +44,8 @@ from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
+INF = float("inf")
+_NO_PIXELS = np.empty(0)    # x of a sample without a frame, for sample_kernels.inputs_valid
 
 
 def check_alpha_gamma(alpha, gamma, section=CONTROLLER_SECTION):
@@ -673,6 +675,8 @@ class AdaptiveVisualTracker:
         self._fast = None           # the compiled sample (sample_kernels.py), with the law
         self._fast_layout = None    # the CompiledSample that wrote _fast_prev
         self._bounds_of = self._bounds = None   # _check_feature
+        self._limits_of = self._limits = None   # _inputs_checked
+        self._inputs_valid = None   # sample_kernels.inputs_valid with the compiled backend
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
@@ -771,32 +775,34 @@ class AdaptiveVisualTracker:
 
         Never raises on bad measurements (see the class docstring).
         """
-        n = self.model.n
-        try:
-            t = float(t)
-            if not isfinite(t):
-                raise InputError("time: not finite")
-            if self.t_last is not None and t <= self.t_last:
-                raise InputError(f"time: {t} is not after the last sample {self.t_last}")
-        except (InputError, TypeError, ValueError) as exc:
-            return self._reject(self.t_last or 0.0, None, None, [str(exc)])
-        try:
-            q = validate_vector("joint positions q", q, n)
-            qd = validate_vector("joint velocities qd", qd, n)
-        except InputError as exc:
-            return self._reject(t, None, None, [str(exc)])
-        if self.damping is None:
+        checked = self._inputs_checked(t, q, qd, x)
+        if not checked:
+            n = self.model.n
             try:
-                self._design(q)
-            except (ConfigError, np.linalg.LinAlgError) as exc:
-                return self._reject(t, q, qd, [f"start: {exc}"])
+                t = float(t)
+                if not isfinite(t):
+                    raise InputError("time: not finite")
+                if self.t_last is not None and t <= self.t_last:
+                    raise InputError(f"time: {t} is not after the last sample {self.t_last}")
+            except (InputError, TypeError, ValueError) as exc:
+                return self._reject(self.t_last or 0.0, None, None, [str(exc)])
+            try:
+                q = validate_vector("joint positions q", q, n)
+                qd = validate_vector("joint velocities qd", qd, n)
+            except InputError as exc:
+                return self._reject(t, None, None, [str(exc)])
+            if self.damping is None:
+                try:
+                    self._design(q)
+                except (ConfigError, np.linalg.LinAlgError) as exc:
+                    return self._reject(t, q, qd, [f"start: {exc}"])
         problems, frame, stamp = [], None, t
         if x is None and not self.compensate:
             problems.append("feature x: missing")
         elif x is not None:
             self.frames["received"] += 1
             try:
-                frame = self._check_feature(x)
+                frame = x if checked else self._check_feature(x)
                 stamp = t if x_stamp is None else float(x_stamp)
                 if not isfinite(stamp):
                     raise InputError("frame: stamp not finite")
@@ -815,6 +821,32 @@ class AdaptiveVisualTracker:
             return self._reject(t, q, qd, problems)
         self._count_frame(t, stamp)
         return self._sample(t, q, qd, frame, None, True)
+
+    def _inputs_checked(self, t, q, qd, x):
+        """Whether t, q, q_dot and x pass every input check of :meth:`step`, in one compiled call.
+
+        Only once the compiled sample runs (the start, with its design, is done) and
+        for inputs exactly as the checks would pass them on: t a float after the last
+        sample, the vectors C-contiguous writable float64 (:func:`.sample_kernels.inputs_valid`).
+        False is no verdict: :meth:`step` then checks them one by one, and names what
+        is wrong.
+        """
+        if self._fast_prev is None or self._inputs_valid is None:
+            return False
+        if type(t) is not float or not self.t_last < t < INF:
+            return False
+        config = self.config
+        if self._limits_of is not config:           # n, 2m and the image bounds as floats
+            n, m2 = self.model.n, 2 * self.model.m
+            bounds = [float(b) for b in config["image_bounds"]]
+            self._limits_of = config
+            self._limits = (np.array([n, m2, *bounds]), np.array([n, 0.0, *bounds]))
+        try:
+            if x is None:
+                return self._inputs_valid(q, qd, _NO_PIXELS, self._limits[1])
+            return self._inputs_valid(q, qd, x, self._limits[0])
+        except TypeError:           # not C-contiguous writable float64 vectors
+            return False
 
     def _check_stale(self, t):
         """Mark the camera stale when no frame was applied for ``safety.camera_timeout``."""
@@ -1236,6 +1268,7 @@ class AdaptiveVisualTracker:
         backend = getattr(self.model, "backend", "numpy")
         if backend != self._law_backend:
             self._law_backend, self._law_kernel, self._fast = backend, None, None
+            self._inputs_valid = None
             # the reference predictor and scale, on lists
             if hasattr(self.predictor, "to_lists"):
                 self.predictor = self.predictor.to_lists()
@@ -1246,9 +1279,10 @@ class AdaptiveVisualTracker:
                 from .law_kernels import CompiledLaw
                 from .motion_scale_kernels import BufferedMotionScale
                 from .prediction_kernels import BufferedFramePredictor
-                from .sample_kernels import CompiledSample, supports
+                from .sample_kernels import CompiledSample, inputs_valid, supports
 
                 self._law_kernel = CompiledLaw(self.model)
+                self._inputs_valid = inputs_valid
                 m2 = 2 * self.model.m
                 self.predictor = BufferedFramePredictor.of(self.predictor, m2)
                 if self.scale is not None:

@@ -27,9 +27,10 @@ array per sample, with the same arithmetic in the same order as the numpy
 code, which stays the readable reference and the test oracle (the tracker on
 the numpy backend, compared at every sample in test_compiled_law.py).
 
-What stays in Python: the inputs' validation, the restart of the observer (a
-rare sample), the frame predictor's and the motion scale's buffers, and the
-:class:`~.controller.StepResult`.  Importing this module imports numba.
+What stays in Python: the restart of the observer (a rare sample), the
+messages that name a refused input (:func:`inputs_valid` checks a sample's
+measurements in one call first), the frame predictor's and the motion scale's
+buffers, and the :class:`~.controller.StepResult`.  Importing this module imports numba.
 
 Calling a numba kernel costs about 60 ns per array argument, so the constant
 arrays (the chain's kinematic constants, the dynamic regressor's, the gains,
@@ -154,6 +155,34 @@ def _desired(cf, ci, sizes, blend, t, xd, xd_dot, xd_ddot):
                 xd[r] = x0 + sigma * gap
                 xd_dot[r] = sigma * v + sd * gap
                 xd_ddot[r] = sigma * a + 2.0 * sd * v + sdd * gap
+
+
+@compiled(signature="boolean(float64[::1], float64[::1], float64[::1], float64[::1])")
+def inputs_valid(q, qd, x, limits):
+    """Whether a sample's measurements pass the tracker's input checks, in one call.
+
+    True when q and q_dot hold ``limits[0]`` finite values and x ``limits[1]``
+    finite pixels, each point inside the image (``limits[2:6]``: u_min, u_max,
+    v_min, v_max); x may be empty (no frame: ``limits[1]`` 0).  The reference
+    checks are :func:`.controller.validate_vector` and the tracker's
+    ``_check_feature``, which name what is wrong: a False sends the sample to
+    them.  The signature takes C-contiguous writable float64 vectors only; any
+    other input (a list, a view, a message's read-only buffer) is refused with
+    TypeError, which also sends it there (they copy it), instead of compiling
+    another specialisation inside the control loop.
+    """
+    n, m2 = limits[0], limits[1]
+    if q.shape[0] != n or qd.shape[0] != n or x.shape[0] != m2:
+        return False
+    for i in range(q.shape[0]):
+        if not (math.isfinite(q[i]) and math.isfinite(qd[i])):
+            return False
+    for i in range(0, x.shape[0], 2):
+        u, v = x[i], x[i + 1]
+        if not (math.isfinite(u) and math.isfinite(v) and limits[2] <= u <= limits[3]
+                and limits[4] <= v <= limits[5]):
+            return False
+    return True
 
 
 @compiled(error_model="numpy")

@@ -51,23 +51,28 @@ def cache_dir():
     return os.path.join(base, "visual_adaptive_servo", "numba")
 
 
-def compiled(function=None, **options):
+def compiled(function=None, signature=None, **options):
     """``numba.njit(cache=True, **options)`` with :func:`cache_dir` as numba's cache directory.
 
     numba picks a function's cache directory when it is decorated, so the
     directory is set for this decoration only and other numba users of the
     process keep theirs.  ``@compiled`` or ``@compiled(error_model="numpy", ...)``.
+    With a ``signature`` the kernel is compiled (or loaded) when it is decorated
+    and takes no other argument types: the dispatcher refuses them (TypeError)
+    instead of compiling another specialisation.
     """
     if function is None:
-        return lambda f: compiled(f, **options)
+        return lambda f: compiled(f, signature, **options)
+    jit = (lambda **kw: numba.njit(**kw)) if signature is None else (
+        lambda **kw: numba.njit(signature, **kw))
     saved = numba_config.CACHE_DIR
     numba_config.CACHE_DIR = cache_dir()
     try:
-        return numba.njit(cache=True, **options)(function)
+        return jit(cache=True, **options)(function)
     except RuntimeError as exc:  # numba: "cannot cache function ...: no locator available"
         log.warning("compiled kernels: no writable cache directory (%s); compiling at every "
                     "start", exc)
-        return numba.njit(**options)(function)
+        return jit(**options)(function)
     finally:
         numba_config.CACHE_DIR = saved
 
