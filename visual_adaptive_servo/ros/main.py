@@ -37,10 +37,14 @@ The executor: :class:`~.executor.KeptWaitSetExecutor` (the node parameter
 ``executor``, read-only, default ``kept_wait_set``), which does rclpy's
 single-threaded work at less than half its CPU per callback (0.45x,
 benchmarks/bench_executor.py), or ``rclpy``: rclpy's own ``SingleThreadedExecutor``.
+
+In ``timing_mode: realtime`` a node also asks for real-time scheduling
+(:func:`realtime_scheduling`: the read-only parameter ``realtime_priority``).
 """
 
 from __future__ import annotations
 
+import gc
 import signal
 import threading
 
@@ -51,6 +55,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..schema import ConfigError
 from .executor import KeptWaitSetExecutor
+from .scheduling import fifo_threads, realtime_threads
 
 SPIN_TIMEOUT = 0.1    # s of wall time: the longest a stop request waits for the executor
 EXECUTORS = {"kept_wait_set": KeptWaitSetExecutor, "rclpy": SingleThreadedExecutor}
@@ -59,6 +64,13 @@ DEFAULT_EXECUTOR = "kept_wait_set"
 EXECUTOR_DESCRIPTION = ("kept_wait_set: the package's executor (one kept wait set, callbacks "
                         "called directly: less than half of rclpy's CPU per callback); rclpy: "
                         "rclpy's SingleThreadedExecutor")
+
+#: SCHED_FIFO priority of a node in realtime (ros2_control's controller_manager takes 50 too)
+REALTIME_PRIORITY = 50
+REALTIME_DESCRIPTION = ("timing_mode realtime only: the executor's and the middleware's threads "
+                        "on SCHED_FIFO at this priority (1-99; a refusal is logged and changes "
+                        "nothing), as ros2_control's controller_manager does; 0: the normal "
+                        "scheduler")
 
 
 def make_executor(node):
@@ -69,6 +81,38 @@ def make_executor(node):
     if name not in EXECUTORS:
         raise ConfigError(f"executor: {name!r} is not one of {sorted(EXECUTORS)}")
     return EXECUTORS[name](context=node.context)
+
+
+def realtime_scheduling(node):
+    """For a node in ``timing_mode: realtime``: SCHED_FIFO and its start-up objects frozen.
+
+    The read-only parameter ``realtime_priority`` (default
+    :data:`REALTIME_PRIORITY`, 0: off) puts the executor's thread and the
+    middleware's on SCHED_FIFO at that priority (:mod:`.scheduling`; a refusal is
+    logged as a warning saying how to allow it, and the node runs on as before),
+    and ``gc.freeze()`` moves every object made so far (the models, the compiled
+    kernels, rclpy) out of the garbage collector's reach, so that its full
+    collections, which would walk them all inside a control period, do not.
+    Nodes in lockstep (their ``lockstep`` attribute true, or none) are left alone:
+    they run flat out, and on SCHED_FIFO they would starve a recorder.
+    """
+    priority = node.declare_parameter(
+        "realtime_priority", REALTIME_PRIORITY,
+        ParameterDescriptor(read_only=True, description=REALTIME_DESCRIPTION)).value
+    if not (isinstance(priority, int) and 0 <= priority <= 99):
+        raise ConfigError(f"realtime_priority: 0 (off) or a SCHED_FIFO priority 1-99, "
+                          f"got {priority!r}")
+    if getattr(node, "lockstep", True) or priority == 0:
+        return
+    gc.freeze()
+    threads = realtime_threads()
+    why_not = fifo_threads(priority, threads)
+    if why_not is None:
+        node.get_logger().info(f"realtime: the executor's and the middleware's threads "
+                               f"({len(threads)}) on SCHED_FIFO priority {priority}")
+    else:
+        node.get_logger().warning(f"realtime_priority: {why_not}; periods may be missed "
+                                  f"when other processes share the cores")
 
 
 def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
@@ -87,6 +131,7 @@ def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
         try:
             node = make_node()
             executor = make_executor(node)
+            realtime_scheduling(node)
         except config_errors as exc:
             rclpy.logging.get_logger(name).fatal(f"invalid configuration: {exc}")
             return 2
