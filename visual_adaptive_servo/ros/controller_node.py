@@ -108,6 +108,8 @@ from dataclasses import replace
 import sys
 import time
 
+import numpy as np
+
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -115,7 +117,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 
 from ..config.controller import build_controller_model, CONTROLLER_PARAMS, ControllerConfig
 from ..control.controller import AdaptiveVisualTracker, frame_values, health
-from ..recording import messages as m
+from ..recording import cdr, messages as m
 from ..recording.cadence import RateGate
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .executor import incompatible_qos_warning
@@ -133,6 +135,7 @@ PUBLISH_RATE = 100.0       # Hz of sim time: default rate of the state topics
 DIAGNOSTICS_RATE = 1.0     # Hz of sim time: default rate of /diagnostics when nothing changes
 MAX_PENDING_FRAMES = 100   # frames kept while waiting for a joint state (more: superseded)
 JOINT_STATE_WATCHDOG = 1.0   # s of wall time without a joint state before the node says so
+NO_VALUES = np.zeros(0)      # the stamped command's position and velocity
 # the controller_manager's ~/activity: published on every change, reliable and transient local
 ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -215,10 +218,14 @@ class ControllerNode(Node):
         self.lockstep = lockstep
         # frames before joint states: the executor serves ready subscriptions in creation
         # order, so a frame that is waiting is always taken before the joint state
+        # both serialized (raw): read by recording.cdr without message objects, and the two
+        # commands go out serialized too
         self.create_subscription(msgs.PolygonStamped, "/camera/features", self._on_features,
-                                 measurement_qos)
+                                 measurement_qos, raw=True)
         self.create_subscription(msgs.JointState, "/joint_states", self._on_joint_state,
-                                 RELIABLE if lockstep else LATEST_SENSOR_DATA)
+                                 RELIABLE if lockstep else LATEST_SENSOR_DATA, raw=True)
+        self.joint_states = cdr.JointStateDecoder(self.joint_names)
+        self.command_cdr = cdr.JointStateEncoder(self.joint_names)
         self.effort_controller = self.declare_parameter("ros2_control.effort_controller",
                                                         "").value
         manager = self.declare_parameter("ros2_control.controller_manager",
@@ -237,7 +244,7 @@ class ControllerNode(Node):
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.pending_frames = []       # (stamp ns, PolygonStamped) not yet passed on
+        self.pending_frames = []       # (stamp ns, (capture time, pixels)) not yet passed on
         self.superseded = 0
         self.last_status = None        # status of the previous sample (publish_every_sample)
         self.health_key = None         # what the health level of the previous sample depends on
@@ -259,8 +266,13 @@ class ControllerNode(Node):
                                    f"({manager}/activity)")
 
     # -- inputs ------------------------------------------------------------------
-    def _on_features(self, msg):
-        self.pending_frames.append((m.stamp_to_ns(msg.header.stamp), msg))
+    def _on_features(self, data):
+        try:
+            stamp_ns, pixels = cdr.polygon_stamped_pixels(data)
+        except ValueError as exc:
+            self.get_logger().error(str(exc), throttle_duration_sec=1.0)
+            return
+        self.pending_frames.append((stamp_ns, (cdr.stamp_time(stamp_ns), pixels)))
         if len(self.pending_frames) > MAX_PENDING_FRAMES:
             del self.pending_frames[0]
             self.superseded += 1
@@ -274,26 +286,29 @@ class ControllerNode(Node):
         self.superseded += len(due) - 1
         return max(due, key=lambda item: item[0])[1]
 
-    def _on_joint_state(self, state_msg):
+    def _on_joint_state(self, data):
         if self.wall_last_state is None or time.monotonic() - self.wall_last_state > \
                 JOINT_STATE_WATCHDOG:
             self.get_logger().info("joint states arriving")
         self.wall_last_state = time.monotonic()
-        frame_msg = self._take_frame(m.stamp_to_ns(state_msg.header.stamp))
+        try:
+            stamp_ns = cdr.header_stamp_ns(data, "joint state")
+        except ValueError as exc:       # not even a stamp to answer
+            self.get_logger().error(str(exc), throttle_duration_sec=1.0)
+            return
+        frame = self._take_frame(stamp_ns)
         if not self.effort_active:
             return       # the effort controller would not pass a command on
-        t = m.stamp_to_time(state_msg.header.stamp)
+        t = cdr.stamp_time(stamp_ns)
         try:
-            t, q, qd = m.joint_state_from_msg(state_msg, self.joint_names)
+            _, q, qd = self.joint_states.decode(data)
         except ValueError as exc:
             self.get_logger().error(str(exc), throttle_duration_sec=1.0)
             q = qd = None
-        x = x_stamp = None
-        if frame_msg is not None:
-            x_stamp, x = m.features_from_msg(frame_msg)
+        x_stamp, x = (None, None) if frame is None else frame
         result = self.tracker.step(t, q, qd, x, x_stamp)
         self.samples += 1
-        self._publish(result, state_msg.header.stamp)
+        self._publish(result, stamp_ns)
         if self.tracker.report is not None and self.tracker.report is not self.reported:
             # the gains derived at the first joint sample, the checks at the start pose
             self.reported = self.tracker.report
@@ -330,18 +345,20 @@ class ControllerNode(Node):
                                       throttle_duration_sec=5.0)
 
     # -- one sample's outputs ----------------------------------------------------
-    def _publish(self, res, stamp):
+    def _publish(self, res, stamp_ns):
         msgs = self.msgs
         # the command its consumer takes first: the simulator in lockstep waits for the stamped
-        # one, the effort controller (or the simulator in realtime) takes the other
+        # one, the effort controller (or the simulator in realtime) takes the other; both
+        # serialized here (recording.cdr: the bytes of m.float_array_to_msg and
+        # m.effort_command_to_msg)
+        command = cdr.float64_array(res.tau)
+        stamped = self.command_cdr.encode(stamp_ns, NO_VALUES, NO_VALUES, res.tau)
         if self.lockstep:
-            self.stamped_command_pub.publish(m.effort_command_to_msg(msgs, stamp,
-                                                                     self.joint_names, res.tau))
-            self.command_pub.publish(m.float_array_to_msg(msgs, res.tau))
+            self.stamped_command_pub.publish(stamped)
+            self.command_pub.publish(command)
         else:
-            self.command_pub.publish(m.float_array_to_msg(msgs, res.tau))
-            self.stamped_command_pub.publish(m.effort_command_to_msg(msgs, stamp,
-                                                                     self.joint_names, res.tau))
+            self.command_pub.publish(command)
+            self.stamped_command_pub.publish(stamped)
         if self.state_gate is None or self.state_gate.due(res.t):
             for topic, msg in m.controller_state_outputs(msgs, res, self.labels):
                 self.publishers_by_topic[topic].publish(msg)

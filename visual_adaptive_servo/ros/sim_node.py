@@ -131,7 +131,7 @@ from sim_bridge.command_age import CommandAge
 from sim_bridge.simulator import Simulator
 
 from ..config.sim import build_sim_arm, SIM_PARAMS, SimConfig
-from ..recording import messages as m
+from ..recording import cdr, messages as m
 from ..recording.recorder import TOPICS
 from ..schema import ConfigError, SIM_SECTION
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
@@ -162,6 +162,7 @@ class SimNode(Node):
         self.config = config = SimConfig.from_params(params)
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
+        self.joint_state_cdr = cdr.JointStateEncoder(config.joint_names)
         self.lockstep = config.timing_mode == "lockstep"
         self.hardware_topic = config["hardware.command_topic"]
         self.state_topic = config["hardware.state_topic"]
@@ -190,8 +191,9 @@ class SimNode(Node):
             self.command_sub = self.create_subscription(
                 msgs.JointState, self.hardware_topic, self._on_hardware_command, RELIABLE)
         else:
+            # serialized (cdr): the command is read without a message object, every period
             self.command_sub = self.create_subscription(
-                msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE)
+                msgs.Float64MultiArray, COMMAND_TOPIC, self._on_command, RELIABLE, raw=True)
         self.effort_controller = config["hardware.effort_controller"] if self.hardware_topic \
             else ""
         self.effort_state = None if self.effort_controller else "active"
@@ -333,8 +335,15 @@ class SimNode(Node):
             return
         self._advance(tau, refused)
 
-    def _on_command(self, msg):
-        self.command, self.command_wall = m.float_array_from_msg(msg)[0], time.monotonic()
+    def _on_command(self, data):
+        try:
+            command = cdr.float64_array_values(data)
+        except ValueError as exc:
+            self.counters["refused_commands"] += 1
+            self.problem = f"{exc}: not applied"
+            self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+            return
+        self.command, self.command_wall = command, time.monotonic()
         self.command_age.received(self.command_wall)
 
     def _on_hardware_command(self, msg):
@@ -497,7 +506,12 @@ class SimNode(Node):
         As a ros2_control hardware /clock follows half a period later (:meth:`_on_tick`).
         """
         t = meas.t
-        for topic, msg in m.sim_outputs(self.msgs, meas, self.config.joint_names):
+        # serialized once here (recording.cdr: the bytes rclpy would make of m.sim_outputs)
+        outputs = cdr.sim_outputs(self.joint_state_cdr, meas)
+        if not self.lockstep:
+            # the joint state right after the frame: the controller's period starts with it
+            outputs.sort(key=lambda output: output[0] not in (FEATURES_TOPIC, "/joint_states"))
+        for topic, msg in outputs:
             if topic == "/clock" and self.hardware_topic:
                 self.pending_clock = msg        # half a period later (_on_tick)
                 continue
