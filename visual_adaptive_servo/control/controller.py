@@ -890,13 +890,14 @@ class AdaptiveVisualTracker:
         else:
             if frame is not None:
                 self._count_frame(t, stamp)
-            result = self._sample(t, q, qd, x_hat, None, frame is not None)
+            result = self._sample(t, q, qd, x_hat, None, frame is not None, store=True)
             if result.status == "ok" and self._fast_sample is not None:
-                # the compiled sample computed the scale's speed and the scaled rate
+                # the compiled sample computed the scale's speed and stored the scaled rate
+                # in the predictor's buffer
                 res, fast = self._fast_sample
                 if self.scale is not None:
                     self.scale.record(t, res[fast.speed])
-                self.predictor.commit_flat(t, x_hat, res[fast.commit_rate], applied)
+                self.predictor.stored(t, applied)
             else:
                 rate = (self._model_rate
                         if result.status == "ok" and self._model_rate is not None
@@ -930,20 +931,21 @@ class AdaptiveVisualTracker:
         _, _, _, Zh, Zh_rate, J_perp, _ = estimated_kinematics(tensors, qd, state)
         return J_perp.dot(qd), Zh_rate, Zh
 
-    def _sample(self, t, q, qd, x, tensors, with_frame):
+    def _sample(self, t, q, qd, x, tensors, with_frame, store=False):
         """Integrate the state to t, evaluate the law with pixels ``x``, saturate and commit.
 
         ``tensors``: the model's kinematic tensors at (q, q_dot), or None (computed here
         when needed).  A sample that does not restart the observer runs compiled in one
         call when the compiled backend is on (:meth:`_sample_compiled`); this code is
-        its reference.
+        its reference.  ``store``: the compiled sample, if accepted, also writes its row
+        of the frame predictor's buffer (the caller ends the commit).
         """
         restarting = self.t_last is None or self.stale
         self._fast_sample = None
         if not restarting:
             fast = self._compiled_sample()
             if fast is not None and self._fast_prev is not None:
-                return self._sample_compiled(fast, t, q, qd, x, with_frame)
+                return self._sample_compiled(fast, t, q, qd, x, with_frame, store)
         if tensors is None:
             tensors = self.model.kinematic_tensors(q, qd)
         e_int = self.e_int
@@ -1019,13 +1021,14 @@ class AdaptiveVisualTracker:
             self._rejecting = ()
         self.last_tau, self.t_last_tau = tau, t
 
-    def _sample_compiled(self, fast, t, q, qd, x, with_frame):
+    def _sample_compiled(self, fast, t, q, qd, x, with_frame, store=False):
         """:meth:`_sample` of a sample that does not restart, in one compiled call.
 
         The same steps in the same order (:mod:`.sample_kernels`): the Euler step of
         the state, the motion scale's advance, the integral, the projection's test
         and clamp, x_d(t), the law, the checks, the saturation; nothing is kept when
-        the sample is refused.
+        the sample is refused.  ``store``: an accepted sample also goes in the frame
+        predictor's buffer, written by the kernel (:meth:`.BufferedFramePredictor.store`).
         """
         config = self.config
         key = fast.key
@@ -1044,7 +1047,8 @@ class AdaptiveVisualTracker:
         res = np.empty(fast.size)
         try:
             finite, sigma_min, damped, active, saturated = fast.kernel(
-                fast.cf, fast.ci, fast.blend, self._fast_prev, res, q, qd, x, t, dt, s, s_dot)
+                fast.cf, fast.ci, fast.blend, self._fast_prev, res, q, qd, x, t, dt, s, s_dot,
+                *(self.predictor.store() if store else fast.no_store))
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
                                            "its pseudo-inverse; state kept)"])

@@ -120,6 +120,8 @@ class BufferedFramePredictor(FramePredictor):
         self.drift = 0.0
         self.last_stamp = None
         self.m2 = int(m2)
+        self._keep = 1.5 * self.horizon    # trimmed once the oldest sample is this old
+        self._t_first = 0.0                # the oldest sample's time (stored)
         self._zeros = np.zeros(self.m2)     # b before any drift is learnt
         self._allocate(int(capacity))
         self._warm_up()
@@ -201,7 +203,9 @@ class BufferedFramePredictor(FramePredictor):
         x_frame = np.asarray(x_frame, dtype=float)
         if stamp >= t - TIME_EPS:
             if self.gain >= 1.0 and self.drift_gain == 0.0:
-                return x_frame.copy()         # a frame of now resets: nothing to predict
+                # a frame of now resets: nothing to predict; not copied (the list-based
+                # predictor keeps x_hat, this one copies it into its buffer)
+                return x_frame
             return super().correct(stamp, x_frame, t)
         a, b = self._start, self._end
         i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
@@ -220,10 +224,7 @@ class BufferedFramePredictor(FramePredictor):
 
     def commit_flat(self, t, x_hat, rate, applied_stamp=None):
         """:meth:`commit` with ``rate`` flat: J_perp q_dot, Z_dot, Z end to end (3 x 2m)."""
-        end = self._end
-        if end == self._times.shape[0]:
-            self._make_room()
-            end = self._end
+        end = self.next_row()
         self._times[end] = t
         self._rates_flat[end] = rate
         if x_hat is None:
@@ -231,11 +232,33 @@ class BufferedFramePredictor(FramePredictor):
         else:
             self._history[end] = x_hat
             self._has[end] = True
-        self._end = end + 1
+        self.stored(t, applied_stamp)
+
+    def next_row(self):
+        """The row the next sample goes in (the buffer compacted or grown first if full)."""
+        if self._end == self._times.shape[0]:
+            self._make_room()
+        return self._end
+
+    def store(self):
+        """(times, rates flat, history, has, row): where the compiled sample stores a sample.
+
+        :func:`.sample_kernels.sample` writes the row as :meth:`commit_flat` does; then
+        :meth:`stored` ends the commit.
+        """
+        row = self.next_row()           # first: it may compact or grow the arrays
+        return self._times, self._rates_flat, self._history, self._has, row
+
+    def stored(self, t, applied_stamp=None):
+        """End the commit of the sample at ``t`` written in :meth:`next_row`: keep it, trim."""
+        end = self._end = self._end + 1
         if applied_stamp is not None:
             self.last_stamp = applied_stamp
-        if t - self._times[self._start] > 1.5 * self.horizon:
-            self._start += first_kept(self._times[self._start:self._end], t, self.horizon)
+        if end - self._start == 1:
+            self._t_first = t            # times[_start] as a float: read at every sample
+        if t - self._t_first > self._keep:
+            self._start += first_kept(self._times[self._start:end], t, self.horizon)
+            self._t_first = float(self._times[self._start])
 
     def _make_room(self):
         make_room(self, ("_times", "_rates", "_history", "_has"))

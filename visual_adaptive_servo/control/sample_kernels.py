@@ -157,6 +157,10 @@ def _desired(cf, ci, sizes, blend, t, xd, xd_dot, xd_ddot):
                 xd_ddot[r] = sigma * a + 2.0 * sd * v + sdd * gap
 
 
+#: the last five arguments of :func:`sample` when the sample is stored nowhere
+NO_STORE = (np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0, dtype=np.bool_), -1)
+
+
 @compiled(signature="boolean(float64[::1], float64[::1], float64[::1], float64[::1])")
 def inputs_valid(q, qd, x, limits):
     """Whether a sample's measurements pass the tracker's input checks, in one call.
@@ -186,7 +190,7 @@ def inputs_valid(q, qd, x, limits):
 
 
 @compiled(error_model="numpy")
-def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
+def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, times, rates, history, has, at):
     """One sample of :meth:`.controller.AdaptiveVisualTracker._sample`, not a restart.
 
     ``prev`` is the last accepted sample's array (its state, rates, integral and
@@ -197,6 +201,11 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
     (finite, sigma_min, damped, projection_active, saturated); with finite False
     ``res`` is to be dropped (the tracker keeps its state).  A singular J* raises
     LinAlgError, as the numpy law does.
+
+    ``at`` >= 0: an accepted sample is also stored in row ``at`` of the frame
+    predictor's buffer (``times``, ``rates`` flat, ``history``, ``has`` of
+    :class:`.prediction_kernels.BufferedFramePredictor`): what its ``commit_flat``
+    writes of (t, x, the rate below), here without a call of its own.
     """
     sizes = _view1(ci, ci, _SIZES)
     n = q.shape[0]
@@ -327,6 +336,13 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot):
         if s != 1.0:
             jq, z_dot = s * jq, s * z_dot
         res[o_rate + r], res[o_rate + m2 + r], res[o_rate + 2 * m2 + r] = jq, z_dot, z
+    if at >= 0:
+        times[at] = t
+        for r in range(3 * m2):
+            rates[at, r] = res[o_rate + r]
+        for r in range(m2):
+            history[at, r] = x[r]
+        has[at] = True
     return True, sigma_min, damped, active, saturated
 
 
@@ -374,6 +390,8 @@ class CompiledSample:
 
     #: the kernel (:func:`sample`)
     kernel = staticmethod(sample)
+    #: its last arguments for a sample stored nowhere
+    no_store = NO_STORE
 
     def __init__(self, law_kernel, model, trajectory):
         self.law = law_kernel
@@ -512,6 +530,6 @@ class CompiledSample:
         prev[self.state] = 1.0
         try:
             sample(cf, ci, self.blend, prev, np.empty(self.size), np.zeros(n), np.zeros(n),
-                   np.zeros(m2), 1.0, 0.001, 1.0, 0.0)
+                   np.zeros(m2), 1.0, 0.001, 1.0, 0.0, *NO_STORE)
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
