@@ -75,7 +75,7 @@ from visual_adaptive_servo.config.ros2_control import (
 )
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
-from visual_adaptive_servo.ros.launch_args import executor, executor_argument, \
+from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
     rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
@@ -128,14 +128,14 @@ def _nodes(context):
                            output="screen", parameters=[params_file, {
                                "timing_mode": "realtime", "use_sim_time": True,
                                "ros2_control.effort_controller": EFFORT_CONTROLLER,
-                               **rates(context), **executor(context)}])
+                               **rates(context), **node_parameters(context)}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
-                        "start.wait_for_recorder": record}, **executor(context))])
+                        "start.wait_for_recorder": record}, **node_parameters(context))])
     nodes = [
         Node(package=PACKAGE, executable="robot_description", name="robot_description",
              output="screen", parameters=[{"robot_description": description,
-                                           **executor(context)}]),
+                                           **node_parameters(context)}]),
         Node(package="controller_manager", executable="ros2_control_node",
              name="controller_manager", output="screen",
              parameters=[handle.name, {"use_sim_time": True}]),
@@ -181,6 +181,6 @@ def generate_launch_description():
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist)"),
         *rate_arguments(),
-        executor_argument(),
+        *node_arguments(),
         OpaqueFunction(function=_nodes),
     ])

@@ -64,7 +64,7 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
-from visual_adaptive_servo.ros.launch_args import executor, executor_argument, \
+from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
     rate_arguments, rates
 
 PACKAGE = "visual_adaptive_servo"
@@ -89,14 +89,14 @@ def _nodes(context):
     controller = {"timing_mode": timing_mode, "use_sim_time": True,
                   "publish_every_sample": record and timing_mode == "lockstep"}
     controller.update(rates(context))
-    controller.update(executor(context))
+    controller.update(node_parameters(context))
 
     nodes = [
         Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
              parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
                                        "render.enabled": render,
                                        "start.wait_for_recorder": record,
-                                       **executor(context)}]),
+                                       **node_parameters(context)}]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
              parameters=[params_file, controller]),
@@ -105,7 +105,7 @@ def _nodes(context):
         nodes.append(Node(package=PACKAGE, executable="feature_detector",
                           name="feature_detector", output="screen",
                           parameters=[params_file, {"timing_mode": timing_mode,
-                                                    **executor(context)}]))
+                                                    **node_parameters(context)}]))
     actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
                            f"{camera_mode}")]
     for node in nodes:
@@ -151,7 +151,7 @@ def generate_launch_description():
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
         *rate_arguments("; every sample with record:=true in lockstep"),
-        executor_argument(),
+        *node_arguments(),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist); "
                                           "empty: rosbag2_<date> in the current folder"),

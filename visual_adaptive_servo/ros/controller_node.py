@@ -43,6 +43,12 @@ waiting the executor takes the frame first; the simulator in lockstep delivers
 the frame before the joint state, so the pairing does not depend on timing.  A
 joint state that cannot be converted is processed as a rejected sample.
 
+The joint states and frames are read, and the two commands written, as serialized
+CDR (raw subscriptions, ``publish`` of bytes; :mod:`..recording.cdr`, byte-equal to
+the messages of :mod:`..recording.messages`): message objects cost more than the
+sample at 1 kHz.  In ``timing_mode: realtime`` the node asks for SCHED_FIFO
+(``realtime_priority``, :func:`.main.realtime_scheduling`).
+
 QoS: the commands are published reliable (depth 10).  With
 ``timing_mode: lockstep`` every subscription is reliable (depth 10): the
 simulator waits for each command, so nothing may be lost.  With

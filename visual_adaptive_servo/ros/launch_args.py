@@ -15,14 +15,15 @@
 """Launch arguments for controller_node shared by servo.launch.py and ros2_control.launch.py.
 
 ``publish_rate`` and ``diagnostics_rate``: empty leaves the node's own default;
-``executor``: the package's nodes' executor (ros/main.py), for every node of ours.
+``executor`` and ``realtime_priority``: how every node of ours runs (ros/main.py).
 """
 
 import yaml
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 
-from .main import DEFAULT_EXECUTOR, EXECUTOR_DESCRIPTION, EXECUTORS
+from .main import (DEFAULT_EXECUTOR, EXECUTOR_DESCRIPTION, EXECUTORS, REALTIME_DESCRIPTION,
+                   REALTIME_PRIORITY)
 
 RATE_ARGUMENTS = ("publish_rate", "diagnostics_rate")
 
@@ -39,16 +40,26 @@ def rate_arguments(publish_note=""):
     ]
 
 
-def executor_argument():
-    """DeclareLaunchArgument ``executor``, the choice of :data:`.main.EXECUTORS`."""
-    return DeclareLaunchArgument(
-        "executor", default_value=DEFAULT_EXECUTOR, choices=list(EXECUTORS),
-        description="Executor of the package's nodes: " + EXECUTOR_DESCRIPTION)
+def node_arguments():
+    """DeclareLaunchArgument ``executor`` (:data:`.main.EXECUTORS`) and ``realtime_priority``."""
+    return [
+        DeclareLaunchArgument(
+            "executor", default_value=DEFAULT_EXECUTOR, choices=list(EXECUTORS),
+            description="Executor of the package's nodes: " + EXECUTOR_DESCRIPTION),
+        DeclareLaunchArgument(
+            "realtime_priority", default_value=str(REALTIME_PRIORITY),
+            description="The package's nodes, " + REALTIME_DESCRIPTION),
+    ]
 
 
-def executor(context):
-    """{"executor": the launch argument}, a parameter for each of the package's nodes."""
-    return {"executor": LaunchConfiguration("executor").perform(context)}
+def node_parameters(context):
+    """{"executor", "realtime_priority"}: the launch arguments, parameters of each node of ours.
+
+    The priority YAML-parsed (``50`` is an integer), checked by the node.
+    """
+    return {"executor": LaunchConfiguration("executor").perform(context),
+            "realtime_priority": yaml.safe_load(
+                LaunchConfiguration("realtime_priority").perform(context))}
 
 
 def rates(context):

@@ -92,7 +92,10 @@ controller first: deterministic up to the detector timeout.
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
 ``command_timeout``; as a ros2_control hardware the latest command from
-``hardware.command_topic``, the brakes without one).  A late controller does
+``hardware.command_topic``, the brakes without one), then publishes the frame
+due now and the joint state first, /clock and ~/true_depth after them: the
+controller's period starts with the joint state.  The node asks for SCHED_FIFO
+(``realtime_priority``, :func:`.main.realtime_scheduling`).  A late controller does
 not stop this loop, it only makes it apply the previous command again, so
 :class:`sim_bridge.command_age.CommandAge` counts the periods without a new
 command (since the first command; those before it apart) and the age of the
@@ -104,6 +107,11 @@ as a ros2_control hardware, which resends the effort controller's latest
 command at every cycle, a command whose torques differ from the previous one
 (so a new command bit-identical to the one before, a torque held at its
 limit, is not seen as new there).
+
+The per-period messages (the frame, /clock, /joint_states, ~/true_depth, and the
+commands in realtime) are serialized and read by :mod:`..recording.cdr`, the
+bytes rclpy would make of :func:`..recording.messages.sim_outputs`, without
+message objects.
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
 is reliable (depth 10); in realtime the measurements (/joint_states, the
