@@ -93,8 +93,11 @@ controller first: deterministic up to the detector timeout.
 /effort_controller/commands (zero torque once it is older than
 ``command_timeout``; as a ros2_control hardware the latest command from
 ``hardware.command_topic``, the brakes without one), then publishes the frame
-due now and the joint state first, /clock and ~/true_depth after them: the
-controller's period starts with the joint state.  The node asks for SCHED_FIFO
+due now and the joint state first, /clock and ~/true_depth after them and at
+``publish_rate`` (a read-only node parameter, default 100 Hz of simulated time;
+as a ros2_control hardware /clock at every period): the controller's period
+starts with the joint state, and runs on its stamp, not on /clock (gazebo_ros
+publishes /clock at 10 Hz by default).  The node asks for SCHED_FIFO
 (``realtime_priority``, :func:`.main.realtime_scheduling`).  A late controller does
 not stop this loop, it only makes it apply the previous command again, so
 :class:`sim_bridge.command_age.CommandAge` counts the periods without a new
@@ -140,12 +143,13 @@ from sim_bridge.simulator import Simulator
 
 from ..config.sim import build_sim_arm, SIM_PARAMS, SimConfig
 from ..recording import cdr, messages as m
+from ..recording.cadence import RateGate
 from ..recording.recorder import TOPICS
 from ..schema import ConfigError, SIM_SECTION
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
 from .executor import incompatible_qos_warning
 from .main import run_node
-from .params import declare_schema
+from .params import declare_rate, declare_schema
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 COMMAND_TOPIC = "/effort_controller/commands"
@@ -156,6 +160,7 @@ DIAGNOSTICS_PERIOD = 1.0   # s of sim time between two /diagnostics when nothing
 START_POLL = 0.05          # s of wall time between two checks for the subscribers
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
 WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
+PUBLISH_RATE = 100.0       # Hz of sim time: /clock and ~/true_depth in realtime
 # the controller_manager's ~/activity: published on every change, reliable and transient local
 ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -171,10 +176,17 @@ class SimNode(Node):
         self.sim = Simulator(config)
         self.msgs = msgs = m.rclpy_messages()
         self.joint_state_cdr = cdr.JointStateEncoder(config.joint_names)
+        publish_rate = declare_rate(
+            self, SIM_SECTION, "publish_rate", PUBLISH_RATE,
+            "Rate of /clock and ~/true_depth in realtime, in simulated time (lockstep and as "
+            "a ros2_control hardware: every period)")
         self.lockstep = config.timing_mode == "lockstep"
         self.hardware_topic = config["hardware.command_topic"]
         self.state_topic = config["hardware.state_topic"]
         self.rendered = config.camera_mode == "rendered"
+        # realtime, not as a hardware (the controller_manager runs a cycle per /clock)
+        self.slow_gate = (None if self.lockstep or self.hardware_topic
+                          else RateGate(publish_rate, f"{SIM_SECTION}.publish_rate"))
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
 
         camera_topics = ((("/camera/image_raw", "Image"), ("/camera/camera_info", "CameraInfo"))
@@ -519,6 +531,9 @@ class SimNode(Node):
         if not self.lockstep:
             # the joint state right after the frame: the controller's period starts with it
             outputs.sort(key=lambda output: output[0] not in (FEATURES_TOPIC, "/joint_states"))
+        if self.slow_gate is not None and not self.slow_gate.due(t):
+            outputs = [output for output in outputs if output[0] in (FEATURES_TOPIC,
+                                                                     "/joint_states")]
         for topic, msg in outputs:
             if topic == "/clock" and self.hardware_topic:
                 self.pending_clock = msg        # half a period later (_on_tick)
