@@ -674,8 +674,7 @@ class AdaptiveVisualTracker:
         self._law_backend = self._law_kernel = None     # _compiled_law
         self._fast = None           # the compiled sample (sample_kernels.py), with the law
         self._fast_layout = None    # the CompiledSample that wrote _fast_prev
-        self._bounds_of = self._bounds = None   # _check_feature
-        self._limits_of = self._limits = None   # _inputs_checked
+        self._bounds_of = self._bounds = None   # _image_bounds: its configuration, its values
         self._inputs_valid = None   # sample_kernels.inputs_valid with the compiled backend
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
@@ -742,12 +741,22 @@ class AdaptiveVisualTracker:
         return self.desired(t)
 
     # -- the sample -------------------------------------------------------------
+    def _image_bounds(self):
+        """(u_min, u_max, v_min, v_max) as floats, and the limits of ``inputs_valid``.
+
+        Computed once per configuration: ((bounds), (limits with a frame, without)).
+        """
+        config = self.config
+        if self._bounds_of is not config:
+            bounds = config["image_bounds"].tolist()
+            n, m2 = self.model.n, 2 * self.model.m
+            self._bounds_of = config
+            self._bounds = bounds, (np.array([n, m2, *bounds]), np.array([n, 0.0, *bounds]))
+        return self._bounds
+
     def _check_feature(self, x):
         x = validate_vector("feature x", x, 2 * self.model.m)
-        config = self.config
-        if self._bounds_of is not config:           # the bounds as floats, per configuration
-            self._bounds_of, self._bounds = config, config["image_bounds"].tolist()
-        u0, u1, v0, v1 = self._bounds
+        u0, u1, v0, v1 = self._image_bounds()[0]
         pixels = x.tolist()
         us, vs = pixels[0::2], pixels[1::2]
         if u0 <= min(us) and max(us) <= u1 and v0 <= min(vs) and max(vs) <= v1:
@@ -835,16 +844,11 @@ class AdaptiveVisualTracker:
             return False
         if type(t) is not float or not self.t_last < t < INF:
             return False
-        config = self.config
-        if self._limits_of is not config:           # n, 2m and the image bounds as floats
-            n, m2 = self.model.n, 2 * self.model.m
-            bounds = [float(b) for b in config["image_bounds"]]
-            self._limits_of = config
-            self._limits = (np.array([n, m2, *bounds]), np.array([n, 0.0, *bounds]))
+        with_frame, without = self._image_bounds()[1]
         try:
             if x is None:
-                return self._inputs_valid(q, qd, _NO_PIXELS, self._limits[1])
-            return self._inputs_valid(q, qd, x, self._limits[0])
+                return self._inputs_valid(q, qd, _NO_PIXELS, without)
+            return self._inputs_valid(q, qd, x, with_frame)
         except TypeError:           # not C-contiguous writable float64 vectors
             return False
 
