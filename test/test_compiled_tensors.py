@@ -207,8 +207,39 @@ def test_kernels_are_cached_in_the_user_cache_dir_and_loaded_from_it(tmp_path):
     first = run_python(code, XDG_CACHE_HOME=str(tmp_path))
     assert first.returncode == 0, first.stderr
     where, hits = first.stdout.split()
-    assert where == str(tmp_path / "visual_adaptive_servo" / "numba") and hits == "0"
+    assert os.path.dirname(where) == str(tmp_path / "visual_adaptive_servo" / "numba")
+    assert hits == "0"
     assert any(f.endswith(".nbi") for _, _, files in os.walk(where) for f in files)
     second = run_python(code, XDG_CACHE_HOME=str(tmp_path))
     assert second.returncode == 0, second.stderr
     assert second.stdout.split()[1] == "1"
+
+
+def test_the_cache_folder_changes_with_any_source_of_the_package(tmp_path):
+    # numba checks a cached kernel against its own file only: the whole sample
+    # (sample_kernels.py) compiles the law (law_kernels.py) in, so an edit of the law alone
+    # must move the cache, or the cached sample would run the old law
+    import shutil
+
+    tree = tmp_path / "tree"
+    shutil.copytree(os.path.join(ROOT, "visual_adaptive_servo"),
+                    tree / "visual_adaptive_servo",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("from visual_adaptive_servo.models import kernels\n"
+            "print(kernels.cache_dir())\n")
+
+    def where():
+        done = subprocess.run([sys.executable, "-c", code], cwd=tree, capture_output=True,
+                              text=True, timeout=120,
+                              env=dict(os.environ, PYTHONPATH=str(tree),
+                                       NUMBA_CACHE_DIR=str(tmp_path / "cache")))
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    first = where()
+    assert os.path.dirname(first) == str(tmp_path / "cache")
+    assert where() == first                     # the same sources: the same folder
+    law = tree / "visual_adaptive_servo" / "control" / "law_kernels.py"
+    law.write_text(law.read_text().replace("alpha, gamma, kappa = scalars[0]",
+                                           "alpha, gamma, kappa = 1.0 * scalars[0]", 1))
+    assert where() != first

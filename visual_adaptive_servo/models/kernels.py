@@ -23,15 +23,23 @@ small-array calls whose overhead, not the arithmetic, is the cost.
 
 Importing this module imports numba (ImportError without it); compiling is
 lazy, at the first call, and cached on disk (``cache=True``) in
-:func:`cache_dir`: ``$NUMBA_CACHE_DIR`` when set, otherwise
+:func:`cache_dir`: under ``$NUMBA_CACHE_DIR`` when set, otherwise under
 ``$XDG_CACHE_HOME/visual_adaptive_servo/numba`` (``~/.cache/...``), a place
-that is writable for a read-only (ROS, system) install.  When that is not
-writable numba falls back to its own places (the package's ``__pycache__``,
-then ``~/.cache/numba``); when none is, the kernels compile at every start.
+that is writable for a read-only (ROS, system) install, in a folder named by
+a digest of the package's sources.  numba checks a cached kernel against its
+own source file only, not against the kernels and constants it compiled in
+from other modules (the law inside the whole sample, the trajectory's blend,
+a tolerance): with one folder for every version of the sources, changing
+``law_kernels.py`` alone would leave the cached sample running the old law.
+When that place is not writable numba falls back to its own places (the
+package's ``__pycache__``, then ``~/.cache/numba``); when none is, the
+kernels compile at every start.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import logging
 import math
 import os
@@ -45,10 +53,32 @@ log = logging.getLogger(__name__)
 
 def cache_dir():
     """Where the compiled kernels are cached (see the module docstring)."""
-    if numba_config.CACHE_DIR:
-        return numba_config.CACHE_DIR
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "visual_adaptive_servo", "numba")
+    base = numba_config.CACHE_DIR
+    if not base:
+        home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
+                                                                ".cache")
+        base = os.path.join(home, "visual_adaptive_servo", "numba")
+    return os.path.join(base, sources_digest())
+
+
+@functools.lru_cache(maxsize=None)
+def sources_digest(root=None):
+    """16 hex digits of SHA-256 over the package's ``.py`` files (relative paths and bytes).
+
+    ``root``: the package folder (default: this package's).  About 1 MB read once
+    per process.
+    """
+    if root is None:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    digest = hashlib.sha256()
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for name in sorted(f for f in files if f.endswith(".py")):
+            path = os.path.join(folder, name)
+            digest.update(os.path.relpath(path, root).replace(os.sep, "/").encode() + b"\0")
+            with open(path, "rb") as f:
+                digest.update(f.read() + b"\0")
+    return digest.hexdigest()[:16]
 
 
 def compiled(function=None, signature=None, **options):
