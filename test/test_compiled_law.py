@@ -188,7 +188,7 @@ def check_compiled_sample(tracker, reference_tensors, args, returned, where):
     trajectory or start blend), the integral, then :func:`control_law` on those, and the
     saturation.  Returns whether the projection was applied.
     """
-    cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot = args[:12]
+    cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot = args[:14]
     finite, sigma_min, damped, active, saturated = returned
     fast, model = tracker._fast, tracker.model
     state = EstimatorState.from_flat(prev[fast.state] + dt * prev[fast.rates], fast.state_ends)
@@ -211,9 +211,14 @@ def check_compiled_sample(tracker, reference_tensors, args, returned, where):
         e_int = e_int + dt * (prev[fast.x_obs] - prev[fast.xd])
     assert_close(res[fast.e_int], e_int, f"{where}: e_int")
     motion = None if tracker.scale is None else (s, s_dot)
+    # the scale eq (18) maps with: the tracker's motion scale's, read independently of the
+    # kernel's arguments
+    assert (s_ref, s_ref_dot) == ((1.0, 0.0) if tracker.scale is None
+                                  else tracker.scale.reference), f"{where}: reference scale"
     reference = reference_law(model, tracker.gains, state, q, qd, x, *xd, projection,
                               tracker.config["min_singular_value"], tensors,
-                              (kappa, e_int) if kappa > 0.0 else None, motion)
+                              (kappa, e_int) if kappa > 0.0 else None, motion,
+                              None if tracker.scale is None else (s_ref, s_ref_dot))
     assert finite, f"{where}: the kernel found the update not finite"
     assert_law_equal(_flat_law_output(tracker._law_kernel, res[fast.out], sigma_min, damped,
                                       active), reference, where)
@@ -252,7 +257,8 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
     original_evaluate = CompiledLaw.evaluate
     original_kernel = CompiledSample.kernel
     seen = {"samples": 0, "compiled_samples": 0, "projected": 0, "clamped": 0, "damped_D": 0,
-            "integral": 0, "scaled": 0, "steps": 0, "blended": 0, "tracker": None}
+            "integral": 0, "scaled": 0, "steps": 0, "blended": 0, "start_held": 0,
+            "start_decaying": 0, "tracker": None}
 
     def stepped(self, t, q, qd, x=None, x_stamp=None):
         if self is not shadow:
@@ -265,8 +271,10 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
             seen["steps"] += 1
         return result
 
-    def count(tracker, projected, motion):
+    def count(tracker, projected, motion, reference=None):
         seen["samples"] += 1
+        if reference is not None and motion is not None and reference != motion:
+            seen["start_decaying" if tracker.scale.trusted else "start_held"] += 1
         seen["projected"] += projected
         seen["damped_D"] += tracker.gains.D is not None
         seen["integral"] += tracker.config["reference.integral_rate"] > 0.0
@@ -281,20 +289,23 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
                                         f"{name} {case} compiled sample t={t:.4f}")
         seen["compiled_samples"] += 1
         seen["clamped"] += clamped
-        count(tracker, returned[3], None if tracker.scale is None else args[10:12])
+        count(tracker, returned[3], None if tracker.scale is None else args[10:12],
+              None if tracker.scale is None else args[12:14])
         return returned
 
     def evaluated(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                  min_singular_value, tensors, integral, motion_scale=None):
+                  min_singular_value, tensors, integral, motion_scale=None,
+                  reference_scale=None):
         # the compiled law of the samples that are not compiled whole (a restart)
         raw = original_evaluate(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                                min_singular_value, tensors, integral, motion_scale)
+                                min_singular_value, tensors, integral, motion_scale,
+                                reference_scale)
         reference = reference_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot,
                                   projection, min_singular_value, reference_tensors(q, qd),
-                                  integral, motion_scale)
+                                  integral, motion_scale, reference_scale)
         assert_law_equal(_flat_law_output(self, *raw), reference, f"{name} {case} law")
         seen["clamped"] += projection is not None
-        count(seen["tracker"], raw[3], motion_scale)
+        count(seen["tracker"], raw[3], motion_scale, reference_scale)
         return raw
 
     monkeypatch.setattr(AdaptiveVisualTracker, "step", stepped)
@@ -326,6 +337,8 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
         assert seen["integral"] == 0
     if case == "motion_scale":
         assert seen["scaled"] > 0, "the image-motion scale never departed from 1"
+        # the reference's slow start (motion_scale.start_factor 2) held, then decayed
+        assert seen["start_held"] > 0 and seen["start_decaying"] > 0, seen
     if case == "start_off":
         assert seen["blended"] > 0.5 * seen["samples"], "x_d was not blended in"
 

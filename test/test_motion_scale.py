@@ -127,6 +127,97 @@ def test_an_initial_scale_outside_its_bounds_is_refused():
                              "controller_node.motion_scale.initial=2.0"))
 
 
+@pytest.mark.parametrize("buffered", [False, True])
+def test_the_start_factor_holds_until_the_first_fit_then_decays_as_its_derivative_says(buffered):
+    if buffered:
+        pytest.importorskip("numba")
+        from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
+        sc = BufferedMotionScale(0.5, 2.0, 0.2, 5.0, 1.0, 0.5, 4, start_factor=3.0)
+    else:
+        sc = MotionScale(0.5, rate=2.0, lower=0.2, upper=5.0, min_motion=1.0, horizon=0.5,
+                         start_factor=3.0)
+    # before any trusted fit: phi held, no rate (s 1, nothing learnt)
+    assert sc.reference == (3.0, 0.0) and not sc.trusted
+    sc.advance(0.3)
+    assert sc.reference == (3.0, 0.0)
+    # a path that moves tens of px: the first trusted frame starts the decay
+    targets = feed(sc, 1.6, np.zeros(4), noise=0.0, duration=1.0)
+    assert targets and sc.trusted
+    assert sc.factor == 3.0             # phi moves with time (advance), not with frames
+    sc.advance(0.1)
+    assert sc.factor == pytest.approx(3.0 ** exp(-0.2), rel=1e-12)
+    # d(s phi)/dt against a central difference of the exact solution, s moving too
+    h = 1e-6
+    for _ in range(4):
+        r0, r_dot = sc.reference
+        sc.advance(h)
+        assert (sc.reference[0] - r0) / h == pytest.approx(r_dot, rel=1e-4)
+        sc.advance(0.1)
+    # ln phi decays at exactly ``rate``: ln phi(t + 1) = ln phi(t) e^-2
+    before = log(sc.factor)
+    sc.advance(1.0)
+    assert log(sc.factor) == pytest.approx(before * exp(-2.0), rel=1e-12)
+    # the buffered scale and its list twin carry phi and the trust across
+    if buffered:
+        other = sc.to_lists()
+        assert (other.factor, other.trusted, other.start_factor) == (sc.factor, True, 3.0)
+        back = BufferedMotionScale.of(other, 4)
+        assert (back.factor, back.trusted, back.start_factor) == (sc.factor, True, 3.0)
+    # a reset starts slow again
+    sc.reset()
+    assert sc.reference == (3.0, 0.0) and not sc.trusted
+
+
+def test_a_start_factor_below_one_is_refused():
+    from visual_adaptive_servo.config.scenario import load_scenario
+    from visual_adaptive_servo.schema import ConfigError
+
+    base = "config/paper_3dof_urdf.yaml"
+    assert load_scenario(base).controller["motion_scale.start_factor"] == 2.0
+    with pytest.raises(ConfigError, match=r"motion_scale\.start_factor.*0\.5"):
+        load_scenario(base, ("controller_node.motion_scale.start_factor=0.5",))
+    with pytest.raises(ValueError, match="start_factor must be at least 1, got 0.9"):
+        MotionScale(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, start_factor=0.9)
+
+
+def test_the_start_factor_slows_the_reference_and_not_the_observer(scenario, rng):
+    from conftest import paper_gains
+
+    from visual_adaptive_servo.control.controller import control_law, EstimatorState
+
+    model = scenario.controller.model
+    gains = paper_gains(scenario.controller)
+    for _ in range(5):
+        q, qd = rng.normal(0, 1, 3), rng.normal(0, 1, 3)
+        x = rng.uniform(-50, 50, 2)
+        state = EstimatorState(x + 1.0, np.array([210.0, 210.0]), np.array([3.0, 3.0, 3.0]),
+                               rng.normal(0, 5, 8))
+        args = (model, gains, state, q, qd, x, x - 2.0, np.ones(2), np.ones(2))
+        s = (1.3, 0.4)
+        plain = control_law(*args, motion_scale=s)
+        assert_same = np.testing.assert_allclose
+        # None: eq (18) maps with s itself
+        same = control_law(*args, motion_scale=s, reference_scale=s)
+        for name in ("tau", "qr_dot", "qr_ddot"):
+            np.testing.assert_array_equal(getattr(same, name), getattr(plain, name))
+        held = control_law(*args, motion_scale=s, reference_scale=(2 * s[0], 2 * s[1]))
+        # eq (18) maps x_r_dot / (2 s): half the joint reference velocity; with r_dot = 2 s_dot
+        # the product rule of eq (19) halves its acceleration too
+        assert_same(held.qr_dot, plain.qr_dot / 2, rtol=1e-12, atol=1e-12)
+        assert_same(held.qr_ddot, plain.qr_ddot / 2, rtol=1e-12, atol=1e-12)
+        # d/dt (v / r) = v_dot / r - (r_dot / r) (v / r): a rate of r alone shifts qr_ddot by
+        # -(r_dot / r) qr_dot
+        rate = control_law(*args, motion_scale=s, reference_scale=(2.6, 1.5))
+        still = control_law(*args, motion_scale=s, reference_scale=(2.6, 0.0))
+        assert_same(rate.qr_ddot, still.qr_ddot - (1.5 / 2.6) * still.qr_dot,
+                    rtol=1e-9, atol=1e-9)
+        # the observer and the kinematic adaptation keep s (eq (23)'s a_d follows the
+        # reference's joint acceleration, so it changes with it)
+        for name in ("x_obs", "a_z_perp", "a_z"):
+            np.testing.assert_array_equal(getattr(held.rates, name), getattr(plain.rates, name))
+        assert not np.allclose(held.rates.a_d, plain.rates.a_d)
+
+
 def test_old_or_repeated_frames_are_ignored():
     sc = MotionScale(1.0, 1.0, 0.2, 5.0, 0.0, horizon=0.5)
     assert sc.frame(0.0, np.zeros(4)) is None           # no joint sample yet

@@ -260,7 +260,8 @@ class Projection:
 
 
 def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=None,
-                min_singular_value=0.0, tensors=None, integral=None, motion_scale=None):
+                min_singular_value=0.0, tensors=None, integral=None, motion_scale=None,
+                reference_scale=None):
     """Evaluate the paper's controller at one instant.
 
     Parameters
@@ -288,6 +289,10 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         the paper) and its rate: the observer's model term of eq (10) is s times the
         paper's, and eq (18) maps x_r_dot / s (eq (19) its exact derivative); None is
         the paper's law.
+    reference_scale : (r, r_dot) or None
+        What eq (18) maps x_r_dot with instead of s (eq (19) its exact derivative):
+        s phi of the motion scale's slow start (:attr:`.motion_scale.MotionScale.reference`);
+        None: ``motion_scale``.
 
     Returns
     -------
@@ -346,10 +351,13 @@ def control_law(model, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection=N
         a_z_dot = a_z_dot - leak.kinematic * (state.a_z - leak.a_z0)
 
     u_dot = 0.5 * (x_obs_dot + xd_dot)
-    if motion_scale is not None:
-        # the joints move 1/s as fast for the same reference: d/dt (x_r_dot / s)
-        x_r_ddot = x_r_ddot / scale - (scale_dot / scale**2) * x_r_dot
-        x_r_dot = x_r_dot / scale
+    if reference_scale is None:
+        reference_scale = motion_scale
+    if reference_scale is not None:
+        # the joints move 1/r as fast for the same reference: d/dt (x_r_dot / r)
+        r, r_dot = reference_scale
+        x_r_ddot = x_r_ddot / r - (r_dot / r**2) * x_r_dot
+        x_r_dot = x_r_dot / r
     return joint_space_law(model, gains, state, q, qd, (H2, dH2, dH_rate, W, W_rate),
                            (J_perp, J_z), (Zh, Zh_rate), (u, u_dot, x_r_dot, x_r_ddot),
                            (x_obs_dot, a_perp_dot, a_z_dot), projection, min_singular_value,
@@ -681,7 +689,8 @@ class AdaptiveVisualTracker:
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
                                   config["motion_scale.lower"], config["motion_scale.upper"],
                                   config["motion_scale.min_motion"], config["max_frame_age"],
-                                  config["motion_scale.initial"])
+                                  config["motion_scale.initial"],
+                                  config["motion_scale.start_factor"])
                       if config["motion_scale.enabled"] and self.compensate else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
@@ -1045,13 +1054,15 @@ class AdaptiveVisualTracker:
         if scale is not None:
             scale.advance(dt)
             s, s_dot = scale.value, scale.derivative
+            s_ref, s_ref_dot = scale.reference
         else:
-            s, s_dot = 1.0, 0.0
+            s, s_dot = s_ref, s_ref_dot = 1.0, 0.0
         # q, q_dot and x are contiguous, writable float64 (validate_vector, the predictor)
         res = np.empty(fast.size)
         try:
             finite, sigma_min, damped, active, saturated = fast.kernel(
                 fast.cf, fast.ci, fast.blend, self._fast_prev, res, q, qd, x, t, dt, s, s_dot,
+                s_ref, s_ref_dot,
                 *(self.predictor.store() if store else fast.no_store))
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
@@ -1213,7 +1224,8 @@ class AdaptiveVisualTracker:
         if self.scale is not None:
             departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
-                              f"{self.scale.upper:g}], initial {self.scale.initial:g})")
+                              f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
+                              f"start_factor {self.scale.start_factor:g})")
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,
@@ -1253,14 +1265,16 @@ class AdaptiveVisualTracker:
         integral = (kappa, e_int) if kappa > 0.0 else None
         scale = self.scale
         motion_scale = None if scale is None else (scale.value, scale.derivative)
+        reference_scale = None if scale is None else scale.reference
         compiled = self._compiled_law()
         if compiled is not None:
             return _flat_law_output(compiled, *compiled.evaluate(
                 self.gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                self.config["min_singular_value"], tensors, integral, motion_scale))
+                self.config["min_singular_value"], tensors, integral, motion_scale,
+                reference_scale))
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
                            projection, self.config["min_singular_value"], tensors, integral,
-                           motion_scale)
+                           motion_scale, reference_scale)
 
     def _compiled_law(self):
         """:class:`~.law_kernels.CompiledLaw` when the model runs the compiled backend, else None.

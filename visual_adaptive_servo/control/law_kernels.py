@@ -189,12 +189,14 @@ def _inverse(G):
 # single accumulator waits ~4 cycles per add); no assumption about NaN or inf is made
 @compiled(error_model="numpy", fastmath={"reassoc", "contract"})
 def law(H, dH, dH_rate, W, W_rate, x_obs, a_perp, a_z, a_d, q, qd, x, xd, xd_dot, xd_ddot,
-        e_int, scale, scale_dot, gains, bounds, scalars, project, joints, columns, out):
+        e_int, scale, scale_dot, ref_scale, ref_scale_dot, gains, bounds, scalars, project,
+        joints, columns, out):
     """The paper's law at one instant, as :func:`.controller.control_law` computes it.
 
     ``scale``, ``scale_dot``: the image-motion scale s and its rate (1, 0: off; see
-    ``control_law``'s ``motion_scale``).  Few arguments otherwise, because numba's
-    dispatcher checks each one at every call:
+    ``control_law``'s ``motion_scale``); ``ref_scale``, ``ref_scale_dot`` what eq (18)
+    maps with (``control_law``'s ``reference_scale``; s, s_dot when it is None).  Few
+    arguments otherwise, because numba's dispatcher checks each one at every call:
     ``gains`` is K (2m), Gamma_d (p_d), Gamma_z_perp (p_perp), Gamma_z (p_z), the
     leakage's a_z_perp(0), a_z(0), a_d(0) and D (n x n, row-major) end to end;
     ``bounds`` the projection's a_z_perp, a_z, a_d minima and maxima (in that
@@ -305,10 +307,11 @@ def law(H, dH, dH_rate, W, W_rate, x_obs, a_perp, a_z, a_d, q, qd, x, xd, xd_dot
         w_H[r] = x_obs_model * dx_obs[r] - x_r_dot[r] * dx[r]
         w_H_rate[r] = x_mid * dx_obs[r] - u[r] * dx[r]
         u_dot[r] = 0.5 * (x_obs_dot[r] + xd_dot[r])
-        if scale != 1.0 or scale_dot != 0.0:
-            # the motion scale: eq (18) maps x_r_dot / s, eq (19) its exact derivative
-            x_r_ddot[r] = x_r_ddot[r] / scale - (scale_dot / scale ** 2) * x_r_dot[r]
-            x_r_dot[r] = x_r_dot[r] / scale
+        if ref_scale != 1.0 or ref_scale_dot != 0.0:
+            # the motion scale: eq (18) maps x_r_dot / r, eq (19) its exact derivative
+            x_r_ddot[r] = (x_r_ddot[r] / ref_scale
+                           - (ref_scale_dot / ref_scale ** 2) * x_r_dot[r])
+            x_r_dot[r] = x_r_dot[r] / ref_scale
     for p in range(pp):
         a_perp_dot[p] = 0.0
     Y_perp = np.empty(pp)                            # row r of Y_z_perp = q_dot . W
@@ -553,7 +556,8 @@ class CompiledLaw:
         scalars = np.concatenate([np.ones(8), [float(self.kind)], self.gravity])
         try:
             law(*model.kinematic_tensors(zero, zero), pixels, np.ones(p_perp), np.ones(p_z),
-                np.ones(p_d), zero, zero, pixels, pixels, pixels, pixels, pixels, 1.0, 0.0, gains,
+                np.ones(p_d), zero, zero, pixels, pixels, pixels, pixels, pixels, 1.0, 0.0, 1.0,
+                0.0, gains,
                 self._bounds, scalars, False, *self.chain, np.empty(self._size))
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
@@ -578,7 +582,8 @@ class CompiledLaw:
         return flat, scalars
 
     def __call__(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                 min_singular_value, tensors, integral, motion_scale=None):
+                 min_singular_value, tensors, integral, motion_scale=None,
+                 reference_scale=None):
         """The outputs of :func:`law` for the inputs of :func:`.controller.control_law`.
 
         (tau, x_obs_dot, a_perp_dot, a_z_dot, a_d_dot, s, qr_dot, qr_ddot, J_star, z_hat,
@@ -586,13 +591,14 @@ class CompiledLaw:
         """
         out, sigma_min, damped, active = self.evaluate(
             gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection, min_singular_value,
-            tensors, integral, motion_scale)
+            tensors, integral, motion_scale, reference_scale)
         m2 = 2 * self.m
         return (*[out[s] for s in self._slices], out[self._J_star].reshape(m2, self.n),
                 out[self._z_hat], out[self._rate].reshape(3, m2), sigma_min, damped, active)
 
     def evaluate(self, gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                 min_singular_value, tensors, integral, motion_scale=None):
+                 min_singular_value, tensors, integral, motion_scale=None,
+                 reference_scale=None):
         """(out, sigma_min, damped, projection_active): :func:`law`'s one output array.
 
         ``out`` holds tau (n), x_obs_dot (2m), a_perp_dot, a_z_dot, a_d_dot, s, qr_dot,
@@ -601,6 +607,7 @@ class CompiledLaw:
         """
         kappa, e_int = integral if integral is not None else (0.0, self._zeros)
         scale, scale_dot = motion_scale if motion_scale is not None else (1.0, 0.0)
+        ref, ref_dot = reference_scale if reference_scale is not None else (scale, scale_dot)
         if projection is not None and projection is not self._projection:
             self._projection = projection
             self._bounds = np.concatenate([
@@ -617,6 +624,7 @@ class CompiledLaw:
         out = np.empty(self._size)
         sigma_min, damped, active = law(
             *tensors, state.x_obs, state.a_z_perp, state.a_z, state.a_d, q, qd, x, xd, xd_dot,
-            xd_ddot, e_int, float(scale), float(scale_dot), flat, self._bounds, scalars,
+            xd_ddot, e_int, float(scale), float(scale_dot), float(ref), float(ref_dot), flat,
+            self._bounds, scalars,
             projection is not None, *self.chain, out)
         return out, sigma_min, damped, active

@@ -37,6 +37,14 @@ regression is only trusted once the predicted path moved ``min_motion`` px
 ``d ln s / dt = rate (ln s_target - ln s)``, bounded to ``[lower, upper]``,
 so its time derivative is known and eq (19) stays the exact derivative of
 eq (18) (:func:`~.controller.control_law`, argument ``motion_scale``).
+
+Until the first trusted regression nothing says how fast the image really
+moves, and a guessed camera whose image motion is too slow makes the joints
+run past what the observer follows.  ``start_factor`` phi >= 1 slows the
+reference alone at the start: eq (18) maps x_r_dot / (s phi), phi held at
+``start_factor`` until the first trusted regression and then decaying to 1,
+``d ln phi / dt = -rate ln phi`` (the reference's rate is exact again); the
+observer and the adaptation keep s (:attr:`MotionScale.reference`).
 """
 
 from __future__ import annotations
@@ -70,15 +78,21 @@ class MotionScale:
         loop starts slower than designed: that helps when the guessed camera's
         image motion is too slow (the loop would run past its observer) and costs
         an observer lag when the guess is right (docs/robust_adaptation.md).
+    start_factor : float
+        phi >= 1 of the reference's slow start (module docstring): 1 is off.
     """
 
-    def __init__(self, window, rate, lower, upper, min_motion, horizon, initial=1.0):
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, initial=1.0,
+                 start_factor=1.0):
+        if not start_factor >= 1.0:
+            raise ValueError(f"start_factor must be at least 1, got {start_factor}")
         self.window = float(window)
         self.rate = float(rate)
         self.lower, self.upper = float(lower), float(upper)
         self.min_motion = float(min_motion)
         self.horizon = float(horizon)
         self.initial = float(initial)
+        self.start_factor = float(start_factor)
         self.reset()
 
     def reset(self):
@@ -96,17 +110,34 @@ class MotionScale:
         self.weight = 0.0           # the frames' total weight w in the regression
         self.sums = None            # weighted sums (x, P, xP, PP) of the regression, 4 x (2m,)
         self.t_frame = None         # capture time of the last frame in the sums
+        self.factor = self.start_factor  # phi of the reference's slow start
+        self.trusted = False        # a regression has been trusted since the reset
 
     @property
     def derivative(self):
         """ds/dt at the current value."""
         return self.rate * self.value * (log(self.target) - log(self.value))
 
+    @property
+    def reference(self):
+        """(s phi, d(s phi)/dt): the scale eq (18) maps the reference velocity with."""
+        phi = self.factor
+        if phi == 1.0:
+            return self.value, self.derivative
+        phi_dot = -self.rate * phi * log(phi) if self.trusted else 0.0
+        return self.value * phi, self.derivative * phi + self.value * phi_dot
+
     def advance(self, dt):
-        """Move s toward the regression's value over dt (exact for the log-linear law)."""
+        """Move s toward the regression's value, phi toward 1 once trusted, over dt (exact)."""
+        decay = None
         if self.target != self.value:
-            ln_s = log(self.target) + (log(self.value) - log(self.target)) * exp(-self.rate * dt)
+            decay = exp(-self.rate * dt)
+            ln_s = log(self.target) + (log(self.value) - log(self.target)) * decay
             self.value = exp(ln_s)
+        if self.trusted and self.factor != 1.0:
+            if decay is None:
+                decay = exp(-self.rate * dt)
+            self.factor = exp(log(self.factor) * decay)
 
     def record(self, t, speed):
         """Extend the predicted path to joint time t; ``speed`` is the unscaled model rate at t."""
@@ -161,6 +192,7 @@ class MotionScale:
         cov = _numpy_sum([c / w - a * b / w**2 for a, b, c in zip(sx, sp, sxp)])
         s = cov / total
         self.target = min(max(s, self.lower), self.upper)
+        self.trusted = True
         return self.target
 
 

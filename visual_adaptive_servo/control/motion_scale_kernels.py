@@ -118,10 +118,10 @@ class BufferedMotionScale(MotionScale):
     """:class:`.motion_scale.MotionScale` with its path on arrays and its regression compiled."""
 
     def __init__(self, window, rate, lower, upper, min_motion, horizon, m2, capacity=512,
-                 initial=1.0):
+                 initial=1.0, start_factor=1.0):
         self.m2 = int(m2)
         self._capacity = int(capacity)
-        super().__init__(window, rate, lower, upper, min_motion, horizon, initial)
+        super().__init__(window, rate, lower, upper, min_motion, horizon, initial, start_factor)
         self._warm_up()
 
     def _warm_up(self):
@@ -147,7 +147,8 @@ class BufferedMotionScale(MotionScale):
     def of(cls, scale, m2):
         """The buffered scale with the state of a list-based one."""
         new = cls(scale.window, scale.rate, scale.lower, scale.upper, scale.min_motion,
-                  scale.horizon, m2, max(512, 2 * len(scale.times)), scale.initial)
+                  scale.horizon, m2, max(512, 2 * len(scale.times)), scale.initial,
+                  scale.start_factor)
         n = len(scale.times)
         new._times[:n] = scale.times
         if n:
@@ -156,19 +157,21 @@ class BufferedMotionScale(MotionScale):
         new._end = n
         new.value, new.target, new.weight, new.t_frame = (scale.value, scale.target,
                                                           scale.weight, scale.t_frame)
+        new.factor, new.trusted = scale.factor, scale.trusted
         new.sums = None if scale.sums is None else np.array(scale.sums, dtype=float)
         return new
 
     def to_lists(self):
         """The list-based :class:`.motion_scale.MotionScale` with this state."""
         other = MotionScale(self.window, self.rate, self.lower, self.upper, self.min_motion,
-                            self.horizon, self.initial)
+                            self.horizon, self.initial, self.start_factor)
         a, b = self._start, self._end
         other.times = self._times[a:b].tolist()
         other.path = self._path[a:b].tolist()
         other.speed = self._speed[a:b].tolist()
         other.value, other.target, other.weight, other.t_frame = (self.value, self.target,
                                                                   self.weight, self.t_frame)
+        other.factor, other.trusted = self.factor, self.trusted
         other.sums = None if self.sums is None else tuple(self.sums.tolist())
         return other
 
@@ -208,7 +211,7 @@ class BufferedMotionScale(MotionScale):
         self.weight, self.t_frame, self.sums = weight, stamp, sums
         if status == 1:
             return None
-        self.target = target
+        self.target, self.trusted = target, True
         return target
 
     def _make_room(self):

@@ -190,14 +190,16 @@ def inputs_valid(q, qd, x, limits):
 
 
 @compiled(error_model="numpy")
-def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, times, rates, history, has, at):
+def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot, times, rates,
+           history, has, at):
     """One sample of :meth:`.controller.AdaptiveVisualTracker._sample`, not a restart.
 
     ``prev`` is the last accepted sample's array (its state, rates, integral and
     x_d are read), ``res`` this sample's (written; the layout of
     :class:`CompiledSample`); ``x`` the pixels the law sees, ``t`` the sample
     time, ``dt`` the Euler step (already clamped to max_dt), ``s``, ``s_dot`` the
-    image-motion scale (1, 0: off), ``blend`` the start blend in effect.  Returns
+    image-motion scale (1, 0: off), ``s_ref``, ``s_ref_dot`` what eq (18) maps with
+    (:attr:`.motion_scale.MotionScale.reference`), ``blend`` the start blend in effect.  Returns
     (finite, sigma_min, damped, projection_active, saturated); with finite False
     ``res`` is to be dropped (the tracker keeps its state).  A singular J* raises
     LinAlgError, as the numpy law does.
@@ -294,8 +296,8 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, times, rates, hi
     sigma_min, damped, active = law(
         H, dH, dH_rate, W, W_rate, state[:m2], state[m2:m2 + pp], state[m2 + pp:m2 + pp + pz],
         state[m2 + pp + pz:ns], q, qd, x, xd, xd_dot, xd_ddot, e_int, s, s_dot,
-        _view1(cf, ci, _GAINS), bounds, law_scalars, project, _view2(cf, ci, _JOINTS),
-        _view1(ci, ci, _COLUMNS), out)
+        s_ref, s_ref_dot, _view1(cf, ci, _GAINS), bounds, law_scalars, project,
+        _view2(cf, ci, _JOINTS), _view1(ci, ci, _COLUMNS), out)
     # finiteness: the torque entry by entry when its sum is not (as _all_finite), the rates and
     # the state by their sums (as EstimatorState.is_finite)
     total = 0.0
@@ -530,6 +532,6 @@ class CompiledSample:
         prev[self.state] = 1.0
         try:
             sample(cf, ci, self.blend, prev, np.empty(self.size), np.zeros(n), np.zeros(n),
-                   np.zeros(m2), 1.0, 0.001, 1.0, 0.0, *NO_STORE)
+                   np.zeros(m2), 1.0, 0.001, 1.0, 0.0, 1.0, 0.0, *NO_STORE)
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
