@@ -376,6 +376,33 @@ def test_resume_after_a_limit_and_after_ctrl_c_records_every_run_once(tmp_path):
         run_campaign(spec, out, workers=2, progress=False)
 
 
+def test_the_same_factors_in_another_order_are_another_campaign(tmp_path):
+    # the draws take the factors in file order: a spec with them reordered (a YAML dumped
+    # with sorted keys, say) draws other runs, so its folder must not be resumed as this one's
+    text = """\
+        base: paper_3dof.yaml
+        duration: 0.2
+        random:
+          runs: 3
+          seed: 5
+          factors:
+            {first}
+            {second}
+    """
+    a_z = "estimate_scale.a_z: {log_uniform: [0.5, 2.0]}"
+    noise = "pixel_noise: {uniform: [0.2, 1.0]}"
+    one = load_spec(write_spec(str(tmp_path), text.format(first=noise, second=a_z), "one.yaml"))
+    two = load_spec(write_spec(str(tmp_path), text.format(first=a_z, second=noise), "two.yaml"))
+    assert one.raw == two.raw                       # equal as mappings
+    draws_one = [varying for varying, _ in one.factor_sets()]
+    draws_two = [varying for varying, _ in two.factor_sets()]
+    assert draws_one != draws_two
+    assert one.fingerprint() != two.fingerprint()
+    again = load_spec(write_spec(str(tmp_path), text.format(first=noise, second=a_z),
+                                 "again.yaml"))
+    assert again.fingerprint() == one.fingerprint()
+
+
 def exit_or_raise(run):
     """Run 1's worker dies every time; run 2 raises; the others run."""
     if run.index == 1:

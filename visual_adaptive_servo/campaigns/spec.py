@@ -213,8 +213,15 @@ class CampaignSpec:
         return list(dict.fromkeys(self.resolve_base(n) for n in names if n is not None))
 
     def fingerprint(self):
-        """sha256 of the spec's content and of every base configuration file it uses."""
+        """sha256 of the spec's content and of every base configuration file it uses.
+
+        The content with its keys sorted, plus the order of the random factors and of the
+        grid's keys: the draws take the factors in file order (one generator per draw) and
+        the grid's product its keys, so the same factors in another order are other runs.
+        """
         digest = hashlib.sha256(json.dumps(self.raw, sort_keys=True, default=str).encode())
+        digest.update(json.dumps({"random": list(self.random), "grid": list(self.grid)},
+                                 default=str).encode())
         for path in self.bases():
             with open(path, "rb") as handle:
                 digest.update(hashlib.sha256(handle.read()).digest())
