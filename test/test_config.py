@@ -131,3 +131,43 @@ def test_package_paths_resolve_without_a_sourced_ros(monkeypatch):
     with pytest.raises(FileNotFoundError,
                        match=r"sim_node\.urdf: 'package://nope/x.urdf' not found"):
         resolve_path("package://nope/x.urdf", what="sim_node.urdf")
+
+
+def test_an_install_finds_its_shared_files_where_it_installed_them(tmp_path):
+    # colcon build and pip install . put config/ and urdf/ under <prefix>/share/<package>
+    # (setup.py's data_files), not beside the package: a campaign's `base: paper_3dof.yaml`,
+    # vas compare, vas robustness and vas tune's default space must find them there
+    from visual_adaptive_servo.models.resources import own_share, PACKAGE
+
+    def install(prefix):
+        site = prefix / "lib" / "python3.11" / "site-packages"
+        site.mkdir(parents=True)
+        share = prefix / "share" / PACKAGE
+        (share / "config").mkdir(parents=True)
+        (share / "urdf").mkdir()
+        return site, share
+
+    site, share = install(tmp_path / "install" / PACKAGE)
+    assert own_share(str(site), environ={}, prefixes=[]) == {
+        "urdf": str(share / "urdf"), "config": str(share / "config")}
+    # a package found elsewhere (a --target folder): the ament index, as ROS resolves it
+    other = tmp_path / "target"
+    other.mkdir()
+    prefix = tmp_path / "ros"
+    _, ros_share = install(prefix)
+    marker = prefix / "share" / "ament_index" / "resource_index" / "packages"
+    marker.mkdir(parents=True)
+    (marker / PACKAGE).write_text("")
+    assert own_share(str(other), environ={"AMENT_PREFIX_PATH": str(prefix)},
+                     prefixes=[])["config"] == str(ros_share / "config")
+    # or pip's prefixes (sys.prefix, the user base)
+    assert own_share(str(other), environ={}, prefixes=[str(prefix)])["config"] == str(
+        ros_share / "config")
+    # a checkout keeps its own folders, whatever is installed
+    checkout = tmp_path / "checkout"
+    (checkout / "config").mkdir(parents=True)
+    assert own_share(str(checkout), environ={"AMENT_PREFIX_PATH": str(prefix)},
+                     prefixes=[str(prefix)]) == {
+        "urdf": str(checkout / "sim_bridge" / "urdf"), "config": str(checkout / "config")}
+    # nothing anywhere: the checkout's places, which the error messages name
+    assert own_share(str(other), environ={}, prefixes=[])["config"] == str(other / "config")

@@ -22,10 +22,11 @@ Three forms are accepted:
     package (``share/ament_index/resource_index/packages/<package>``), as
     ``ament_index_python.get_package_share_directory`` finds it; the index is
     read directly, so this needs no ROS Python package.  Without ROS, this
-    package's own files are still found: ``package://visual_adaptive_servo/urdf/...``
-    is ``sim_bridge/urdf/...`` and ``package://visual_adaptive_servo/config/...`` is
-    the checkout's ``config/`` (the same files ``colcon build`` installs under those
-    names).
+    package's own files are still found (:data:`OWN_SHARE`):
+    ``package://visual_adaptive_servo/urdf/...`` is a checkout's ``sim_bridge/urdf/...``
+    and ``package://visual_adaptive_servo/config/...`` its ``config/`` (the same files
+    ``colcon build`` and ``pip install .`` install under those names, where an install
+    finds them).
 ``pybullet_data://<path>``
     ``<path>`` inside PyBullet's data folder (``pybullet_data.getDataPath()``),
     e.g. ``pybullet_data://kuka_iiwa/model.urdf``.
@@ -40,11 +41,55 @@ from __future__ import annotations
 import os
 
 PACKAGE = "visual_adaptive_servo"
-#: the folder that holds the visual_adaptive_servo and sim_bridge packages (a checkout)
+#: the folder that holds the visual_adaptive_servo and sim_bridge packages (a checkout, or
+#: the site-packages of an install)
 PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-#: where this package's shared files live in a checkout / pip install, by share subfolder
-OWN_SHARE = {"urdf": os.path.join(PACKAGE_PARENT, "sim_bridge", "urdf"),
-             "config": os.path.join(PACKAGE_PARENT, "config")}
+
+
+def own_share(parent=PACKAGE_PARENT, environ=None, prefixes=None):
+    """Where this package's shared files (``urdf``, ``config``) live, by share subfolder.
+
+    A checkout (or an editable install) has them beside the packages: ``sim_bridge/urdf``
+    and ``config``.  An install (``colcon build``, ``pip install .``) has them where its
+    ``data_files`` put them, ``<prefix>/share/visual_adaptive_servo/{urdf,config}``: the
+    prefix whose ``lib/pythonX.Y/site-packages`` holds this package, else one of
+    ``prefixes`` (default: ``sys.prefix`` and the user base of ``pip install --user``),
+    else the package's share folder in the ament index of ``AMENT_PREFIX_PATH``.  When none
+    has them, the checkout's places (for the error messages).
+    """
+    checkout = {"urdf": os.path.join(parent, "sim_bridge", "urdf"),
+                "config": os.path.join(parent, "config")}
+    if os.path.isdir(checkout["config"]):
+        return checkout
+    if prefixes is None:
+        import site
+        import sys
+
+        prefixes = [sys.prefix, site.getuserbase()]
+    # <prefix>/lib/pythonX.Y/site-packages -> <prefix>
+    shares = [os.path.join(p, "share", PACKAGE)
+              for p in [os.path.dirname(os.path.dirname(os.path.dirname(parent))), *prefixes]]
+    environ = os.environ if environ is None else environ
+    ament = _ament_share(PACKAGE, environ.get("AMENT_PREFIX_PATH", ""))
+    if ament is not None:
+        shares.append(ament)
+    for share in shares:
+        if os.path.isdir(os.path.join(share, "config")):
+            return {"urdf": os.path.join(share, "urdf"), "config": os.path.join(share, "config")}
+    return checkout
+
+
+def _ament_share(package, prefix_path):
+    for prefix in prefix_path.split(os.pathsep):
+        marker = os.path.join(prefix, "share", "ament_index", "resource_index", "packages",
+                              package)
+        if prefix and os.path.isfile(marker):
+            return os.path.join(prefix, "share", package)
+    return None
+
+
+#: where this package's shared files live here, by share subfolder (:func:`own_share`)
+OWN_SHARE = own_share()
 
 
 def resolve_path(name, search_dirs=(), what="file"):
@@ -76,12 +121,7 @@ def resolve_path(name, search_dirs=(), what="file"):
 
 def ament_share_directory(package):
     """The share folder of ``package`` in the ament index of ``AMENT_PREFIX_PATH``, or None."""
-    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
-        marker = os.path.join(prefix, "share", "ament_index", "resource_index", "packages",
-                              package)
-        if prefix and os.path.isfile(marker):
-            return os.path.join(prefix, "share", package)
-    return None
+    return _ament_share(package, os.environ.get("AMENT_PREFIX_PATH", ""))
 
 
 def package_hint(package):
