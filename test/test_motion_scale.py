@@ -173,7 +173,7 @@ def test_a_start_factor_below_one_is_refused():
     from visual_adaptive_servo.schema import ConfigError
 
     base = "config/paper_3dof_urdf.yaml"
-    assert load_scenario(base).controller["motion_scale.start_factor"] == 2.0
+    assert load_scenario(base).controller["motion_scale.start_factor"] == 1.5
     with pytest.raises(ConfigError, match=r"motion_scale\.start_factor.*0\.5"):
         load_scenario(base, ("controller_node.motion_scale.start_factor=0.5",))
     with pytest.raises(ValueError, match="start_factor must be at least 1, got 0.9"):

@@ -235,7 +235,7 @@ CONTROLLER_PARAMS = (
     ParamSpec("motion_scale.initial", 1.0, "float",
               "s before the scale is first learnt (and after a reset), within [lower, upper] "
               "(docs/robust_adaptation.md).", 1e-3, 1e3),
-    ParamSpec("motion_scale.start_factor", 2.0, "float",
+    ParamSpec("motion_scale.start_factor", 1.5, "float",
               "The reference's slow start: eq (18) maps x_r_dot / (s phi), phi held at this "
               "until s is first learnt, then decaying to 1 at motion_scale.rate; 1: off "
               "(docs/robust_adaptation.md).", 1.0, 100.0),
