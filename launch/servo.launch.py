@@ -65,7 +65,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
-    rate_arguments, rates
+    rate_arguments, rates, recorder_qos_overrides
 
 PACKAGE = "visual_adaptive_servo"
 RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
@@ -120,6 +120,9 @@ def _nodes(context):
         if bag_dir:
             cmd += ["-o", bag_dir]
         topics = sorted(TOPICS)
+        if timing_mode == "lockstep":
+            # every period: keep all until written (the publishers keep 2000, ros/executor.py)
+            cmd += ["--qos-profile-overrides-path", recorder_qos_overrides(topics)]
         if camera_mode == "rendered":
             topics += sorted(CAMERA_TOPICS)
             cmd += ["--storage-preset-profile", "zstd_fast"]

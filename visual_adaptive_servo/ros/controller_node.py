@@ -49,7 +49,9 @@ the messages of :mod:`..recording.messages`): message objects cost more than the
 sample at 1 kHz.  In ``timing_mode: realtime`` the node asks for SCHED_FIFO
 (``realtime_priority``, :func:`.main.realtime_scheduling`).
 
-QoS: the commands are published reliable (depth 10).  With
+QoS: the commands are published reliable (depth 10; 2000 for every topic with
+``publish_every_sample`` in lockstep, so a recorder that falls behind loses no
+period).  With
 ``timing_mode: lockstep`` every subscription is reliable (depth 10): the
 simulator waits for each command, so nothing may be lost.  With
 ``timing_mode: realtime`` the measurements are sensor data (best effort,
@@ -126,7 +128,7 @@ from ..control.controller import AdaptiveVisualTracker, frame_values, health
 from ..recording import cdr, messages as m
 from ..recording.cadence import RateGate
 from ..schema import CONTROLLER_SECTION, ConfigError
-from .executor import incompatible_qos_warning
+from .executor import incompatible_qos_warning, RECORDED
 from .main import run_node
 from .params import declare_node_parameter, declare_rate, declare_schema, runtime_changes
 
@@ -205,9 +207,12 @@ class ControllerNode(Node):
 
         lockstep = config.timing_mode == "lockstep"
         measurement_qos = RELIABLE if lockstep else qos_profile_sensor_data
+        # every sample recorded in lockstep: a deep history lets the recorder fall behind
+        # without losing a period (ros/executor.py, RECORDED)
+        published = RECORDED if lockstep and self.every_sample else RELIABLE
         msgs = self.msgs
         self.publishers_by_topic = {
-            topic: self.create_publisher(getattr(msgs, kind), topic, RELIABLE,
+            topic: self.create_publisher(getattr(msgs, kind), topic, published,
                                          event_callbacks=incompatible_qos_warning(self, topic))
             for topic, kind in (("/effort_controller/commands", "Float64MultiArray"),
                                 ("~/desired", "PolygonStamped"),
@@ -217,7 +222,7 @@ class ControllerNode(Node):
                                 ("~/parameters", "Float64MultiArray"),
                                 ("~/effort_command", "JointState"))}
         self.diagnostics_pub = self.create_publisher(
-            msgs.DiagnosticArray, "/diagnostics", RELIABLE,
+            msgs.DiagnosticArray, "/diagnostics", published,
             event_callbacks=incompatible_qos_warning(self, "/diagnostics"))
         self.command_pub = self.publishers_by_topic["/effort_controller/commands"]
         self.stamped_command_pub = self.publishers_by_topic["~/effort_command"]

@@ -55,9 +55,16 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle
 from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.qos import qos_policy_name_from_kind
+from rclpy.qos import QoSProfile, qos_policy_name_from_kind, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rclpy.task import Task
+
+
+#: history of the reliable publishers a lockstep recording takes every period of: how many
+#: messages a topic's recorder may fall behind (descheduled, stalled) before it loses the
+#: oldest.  The history holds a message only until every reliable reader acknowledged it.
+RECORDED_DEPTH = 2000
+RECORDED = QoSProfile(depth=RECORDED_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def incompatible_qos_warning(node, topic):

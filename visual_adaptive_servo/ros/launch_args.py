@@ -69,3 +69,22 @@ def rates(context):
     """
     given = {name: LaunchConfiguration(name).perform(context) for name in RATE_ARGUMENTS}
     return {name: yaml.safe_load(text) for name, text in given.items() if text}
+
+
+def recorder_qos_overrides(topics, folder=None):
+    """A ``--qos-profile-overrides-path`` file: ``topics`` recorded reliable, keeping all.
+
+    For a lockstep recording, whose publishers are reliable with a deep history
+    (ros/executor.py, ``RECORDED``): the recorder's own history then never drops
+    what it has not written yet.  Written to a new file in ``folder`` (default: the
+    temporary folder); returns its path.  Not for realtime: there the measurements
+    are best effort, which a reliable request would not match.
+    """
+    import tempfile
+
+    overrides = {topic: {"history": "keep_all", "reliability": "reliable",
+                         "durability": "volatile"} for topic in topics}
+    handle, path = tempfile.mkstemp(prefix="vas-recorder-qos-", suffix=".yaml", dir=folder)
+    with open(handle, "w", encoding="utf-8") as stream:
+        yaml.safe_dump(overrides, stream)
+    return path

@@ -117,9 +117,10 @@ bytes rclpy would make of :func:`..recording.messages.sim_outputs`, without
 message objects.
 
 QoS: commands are reliable (depth 10) in both modes.  In lockstep everything
-is reliable (depth 10); in realtime the measurements (/joint_states, the
-camera topics, ~/image) are sensor data (best effort, depth 5) and the rest is
-reliable.
+is reliable (depth 10; with ``start.wait_for_recorder`` the published topics but
+the pictures keep 2000, so a recorder that falls behind loses no period); in
+realtime the measurements (/joint_states, the camera topics, ~/image) are sensor
+data (best effort, depth 5) and the rest is reliable.
 
 ``duration`` > 0: after that much simulated time the node stops stepping and
 exits with status 0.  SIGINT/SIGTERM stop it cleanly (:mod:`.main`).
@@ -147,7 +148,7 @@ from ..recording.cadence import RateGate
 from ..recording.recorder import TOPICS
 from ..schema import ConfigError, SIM_SECTION
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED
-from .executor import incompatible_qos_warning
+from .executor import incompatible_qos_warning, RECORDED
 from .main import run_node
 from .params import declare_rate, declare_schema
 
@@ -188,6 +189,10 @@ class SimNode(Node):
         self.slow_gate = (None if self.lockstep or self.hardware_topic
                           else RateGate(publish_rate, f"{SIM_SECTION}.publish_rate"))
         measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
+        # a lockstep recording keeps every period: a deep history lets the recorder fall
+        # behind without losing one (the pictures keep 10: 2000 of them would be 2 GB)
+        recorded = RECORDED if self.lockstep and config["start.wait_for_recorder"] \
+            else RELIABLE
 
         camera_topics = ((("/camera/image_raw", "Image"), ("/camera/camera_info", "CameraInfo"))
                          if self.rendered else ((FEATURES_TOPIC, "PolygonStamped"),))
@@ -195,14 +200,16 @@ class SimNode(Node):
             topic: self.create_publisher(getattr(msgs, kind), topic, qos,
                                          event_callbacks=incompatible_qos_warning(self, topic))
             for topic, kind, qos in (
-                *((topic, kind, measurement_qos) for topic, kind in camera_topics),
-                ("/clock", "Clock", RELIABLE),
-                (self.state_topic, "JointState", measurement_qos),
-                ("~/true_depth", "Float64MultiArray", RELIABLE))}
+                *((topic, kind, measurement_qos if self.rendered or not self.lockstep
+                   else recorded) for topic, kind in camera_topics),
+                ("/clock", "Clock", recorded),
+                (self.state_topic, "JointState",
+                 recorded if self.lockstep else measurement_qos),
+                ("~/true_depth", "Float64MultiArray", recorded))}
         # sim_outputs names the joint state /joint_states, wherever it is published
         self.publishers_by_topic["/joint_states"] = self.publishers_by_topic.pop(self.state_topic)
         self.diagnostics_pub = self.create_publisher(
-            msgs.DiagnosticArray, "/diagnostics", RELIABLE,
+            msgs.DiagnosticArray, "/diagnostics", recorded,
             event_callbacks=incompatible_qos_warning(self, "/diagnostics"))
         if self.lockstep:
             self.command_sub = self.create_subscription(
