@@ -92,14 +92,18 @@ def test_the_smoothing_is_the_exact_solution_of_its_derivative():
     assert log(sc.value) == pytest.approx(log(3.0) * (1 - exp(-2.0 * t)), rel=1e-9)
 
 
+def make_scale(buffered, window, rate, lower, upper, min_motion, horizon, **options):
+    """A MotionScale, or with ``buffered`` its compiled BufferedMotionScale (4 pixel values)."""
+    if not buffered:
+        return MotionScale(window, rate, lower, upper, min_motion, horizon, **options)
+    pytest.importorskip("numba")
+    from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
+    return BufferedMotionScale(window, rate, lower, upper, min_motion, horizon, 4, **options)
+
+
 @pytest.mark.parametrize("buffered", [False, True])
 def test_the_scale_starts_and_restarts_at_its_initial_value(buffered):
-    if buffered:
-        pytest.importorskip("numba")
-        from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
-        sc = BufferedMotionScale(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, 4, initial=2.0)
-    else:
-        sc = MotionScale(1.0, 1.0, 0.2, 5.0, 1.0, 1.0, initial=2.0)
+    sc = make_scale(buffered, 1.0, 1.0, 0.2, 5.0, 1.0, 1.0, initial=2.0)
     assert sc.value == sc.target == 2.0 and sc.derivative == 0.0
     sc.advance(0.5)                                   # nothing learnt: s stays where it starts
     assert sc.value == 2.0
@@ -129,13 +133,8 @@ def test_an_initial_scale_outside_its_bounds_is_refused():
 
 @pytest.mark.parametrize("buffered", [False, True])
 def test_the_start_factor_holds_until_the_first_fit_then_decays_as_its_derivative_says(buffered):
-    if buffered:
-        pytest.importorskip("numba")
-        from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionScale
-        sc = BufferedMotionScale(0.5, 2.0, 0.2, 5.0, 1.0, 0.5, 4, start_factor=3.0)
-    else:
-        sc = MotionScale(0.5, rate=2.0, lower=0.2, upper=5.0, min_motion=1.0, horizon=0.5,
-                         start_factor=3.0)
+    sc = make_scale(buffered, 0.5, rate=2.0, lower=0.2, upper=5.0, min_motion=1.0, horizon=0.5,
+                    start_factor=3.0)
     # before any trusted fit: phi held, no rate (s 1, nothing learnt)
     assert sc.reference == (3.0, 0.0) and not sc.trusted
     sc.advance(0.3)
@@ -161,7 +160,7 @@ def test_the_start_factor_holds_until_the_first_fit_then_decays_as_its_derivativ
     if buffered:
         other = sc.to_lists()
         assert (other.factor, other.trusted, other.start_factor) == (sc.factor, True, 3.0)
-        back = BufferedMotionScale.of(other, 4)
+        back = type(sc).of(other, 4)
         assert (back.factor, back.trusted, back.start_factor) == (sc.factor, True, 3.0)
     # a reset starts slow again
     sc.reset()

@@ -1053,8 +1053,7 @@ class AdaptiveVisualTracker:
         scale = self.scale
         if scale is not None:
             scale.advance(dt)
-            s, s_dot = scale.value, scale.derivative
-            s_ref, s_ref_dot = scale.reference
+            s, s_dot, s_ref, s_ref_dot = scale.scales()
         else:
             s, s_dot = s_ref, s_ref_dot = 1.0, 0.0
         # q, q_dot and x are contiguous, writable float64 (validate_vector, the predictor)
@@ -1264,8 +1263,10 @@ class AdaptiveVisualTracker:
         kappa = self.config["reference.integral_rate"] * self.gains.gamma ** 2
         integral = (kappa, e_int) if kappa > 0.0 else None
         scale = self.scale
-        motion_scale = None if scale is None else (scale.value, scale.derivative)
-        reference_scale = None if scale is None else scale.reference
+        motion_scale = reference_scale = None
+        if scale is not None:
+            s, s_dot, s_ref, s_ref_dot = scale.scales()
+            motion_scale, reference_scale = (s, s_dot), (s_ref, s_ref_dot)
         compiled = self._compiled_law()
         if compiled is not None:
             return _flat_law_output(compiled, *compiled.evaluate(

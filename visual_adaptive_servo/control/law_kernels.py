@@ -557,8 +557,7 @@ class CompiledLaw:
         try:
             law(*model.kinematic_tensors(zero, zero), pixels, np.ones(p_perp), np.ones(p_z),
                 np.ones(p_d), zero, zero, pixels, pixels, pixels, pixels, pixels, 1.0, 0.0, 1.0,
-                0.0, gains,
-                self._bounds, scalars, False, *self.chain, np.empty(self._size))
+                0.0, gains, self._bounds, scalars, False, *self.chain, np.empty(self._size))
         except np.linalg.LinAlgError:
             pass                    # placeholder inputs: J* may well be singular
 
@@ -625,6 +624,5 @@ class CompiledLaw:
         sigma_min, damped, active = law(
             *tensors, state.x_obs, state.a_z_perp, state.a_z, state.a_d, q, qd, x, xd, xd_dot,
             xd_ddot, e_int, float(scale), float(scale_dot), float(ref), float(ref_dot), flat,
-            self._bounds, scalars,
-            projection is not None, *self.chain, out)
+            self._bounds, scalars, projection is not None, *self.chain, out)
         return out, sigma_min, damped, active

@@ -121,11 +121,15 @@ class MotionScale:
     @property
     def reference(self):
         """(s phi, d(s phi)/dt): the scale eq (18) maps the reference velocity with."""
-        phi = self.factor
+        return self.scales()[2:]
+
+    def scales(self):
+        """(s, ds/dt, s phi, d(s phi)/dt), ds/dt computed once (every control sample)."""
+        s, s_dot, phi = self.value, self.derivative, self.factor
         if phi == 1.0:
-            return self.value, self.derivative
+            return s, s_dot, s, s_dot
         phi_dot = -self.rate * phi * log(phi) if self.trusted else 0.0
-        return self.value * phi, self.derivative * phi + self.value * phi_dot
+        return s, s_dot, s * phi, s_dot * phi + s * phi_dot
 
     def advance(self, dt):
         """Move s toward the regression's value, phi toward 1 once trusted, over dt (exact)."""

@@ -18,6 +18,8 @@
 ``executor`` and ``realtime_priority``: how every node of ours runs (ros/main.py).
 """
 
+import tempfile
+
 import yaml
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
@@ -80,8 +82,6 @@ def recorder_qos_overrides(topics, folder=None):
     temporary folder); returns its path.  Not for realtime: there the measurements
     are best effort, which a reliable request would not match.
     """
-    import tempfile
-
     overrides = {topic: {"history": "keep_all", "reliability": "reliable",
                          "durability": "volatile"} for topic in topics}
     handle, path = tempfile.mkstemp(prefix="vas-recorder-qos-", suffix=".yaml", dir=folder)

@@ -188,23 +188,23 @@ class SimNode(Node):
         # realtime, not as a hardware (the controller_manager runs a cycle per /clock)
         self.slow_gate = (None if self.lockstep or self.hardware_topic
                           else RateGate(publish_rate, f"{SIM_SECTION}.publish_rate"))
-        measurement_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
         # a lockstep recording keeps every period: a deep history lets the recorder fall
         # behind without losing one (the pictures keep 10: 2000 of them would be 2 GB)
         recorded = RECORDED if self.lockstep and config["start.wait_for_recorder"] \
             else RELIABLE
+        picture_qos = RELIABLE if self.lockstep else qos_profile_sensor_data
+        measurement_qos = recorded if self.lockstep else qos_profile_sensor_data
 
         camera_topics = ((("/camera/image_raw", "Image"), ("/camera/camera_info", "CameraInfo"))
                          if self.rendered else ((FEATURES_TOPIC, "PolygonStamped"),))
+        camera_qos = picture_qos if self.rendered else measurement_qos
         self.publishers_by_topic = {
             topic: self.create_publisher(getattr(msgs, kind), topic, qos,
                                          event_callbacks=incompatible_qos_warning(self, topic))
             for topic, kind, qos in (
-                *((topic, kind, measurement_qos if self.rendered or not self.lockstep
-                   else recorded) for topic, kind in camera_topics),
+                *((topic, kind, camera_qos) for topic, kind in camera_topics),
                 ("/clock", "Clock", recorded),
-                (self.state_topic, "JointState",
-                 recorded if self.lockstep else measurement_qos),
+                (self.state_topic, "JointState", measurement_qos),
                 ("~/true_depth", "Float64MultiArray", recorded))}
         # sim_outputs names the joint state /joint_states, wherever it is published
         self.publishers_by_topic["/joint_states"] = self.publishers_by_topic.pop(self.state_topic)
@@ -239,7 +239,7 @@ class SimNode(Node):
                                                           self._on_detected, RELIABLE)
         self.render_every = 0
         if config.params["render.enabled"]:
-            self.image_pub = self.create_publisher(msgs.Image, "~/image", measurement_qos)
+            self.image_pub = self.create_publisher(msgs.Image, "~/image", picture_qos)
             self.render_every = max(1, int(np.rint(1.0 / (config.params["render.rate"]
                                                           * config.control_period))))
             self.overlay = {"desired": None, "observed": None}
