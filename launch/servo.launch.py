@@ -42,10 +42,13 @@ controller_node publishes its commands at every sample and its other topics at
 ``publish_rate`` and /diagnostics at ``diagnostics_rate`` (empty: the node's
 defaults, 100 Hz and 1 Hz); with ``record:=true`` in lockstep it publishes
 everything at every sample (``publish_every_sample``), so the bag holds every
-period, as ``vas run``'s recording does.
+period, as ``vas run``'s recording does; when the simulator is done the
+controller is stopped first and waits until the recorder has everything it
+published, and its exit stops the rest.
 """
 
 import os
+import signal
 
 import yaml
 from ament_index_python.packages import get_package_share_directory
@@ -60,7 +63,8 @@ from launch.actions import (
     TimerAction,
 )
 from launch.event_handlers import OnProcessExit
-from launch.events import Shutdown
+from launch.events import matches_action, Shutdown
+from launch.events.process import SignalProcess
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
@@ -68,7 +72,8 @@ from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameter
     rate_arguments, rates, recorder_qos_overrides
 
 PACKAGE = "visual_adaptive_servo"
-RECORDER_GRACE = 1.0   # s of wall time between the simulator's exit and the shutdown
+# s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
+RECORDER_GRACE = 1.0
 
 
 def _file_camera_mode(params_file):
@@ -108,10 +113,17 @@ def _nodes(context):
                                                     **node_parameters(context)}]))
     actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
                            f"{camera_mode}")]
+    sim, controller = nodes[0], nodes[1]
     for node in nodes:
         shutdown = EmitEvent(event=Shutdown(reason=f"{node.node_executable} exited"))
         on_exit = [TimerAction(period=RECORDER_GRACE, actions=[shutdown])] if record else \
             [shutdown]
+        if node is sim and record and timing_mode == "lockstep":
+            # every period in the bag: the controller stops first and waits until the
+            # recorder has all it published (ControllerNode.flush_on_exit); its exit then
+            # stops the rest
+            on_exit = [EmitEvent(event=SignalProcess(signal_number=signal.SIGINT,
+                                                     process_matcher=matches_action(controller)))]
         actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
                                                           on_exit=on_exit)))
     if record:

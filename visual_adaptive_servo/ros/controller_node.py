@@ -120,6 +120,7 @@ import numpy as np
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
@@ -164,6 +165,11 @@ class RosLogHandler(logging.Handler):
             self.logger.warning(text, throttle_duration_sec=1.0)
         else:
             self.logger.info(text, throttle_duration_sec=1.0)
+
+
+#: s of wall time the node waits at its exit for a lockstep recording's recorder to have
+#: every message it published (the recorder may have fallen behind: ros/executor.py RECORDED)
+FLUSH_TIMEOUT = 10.0
 
 
 class ControllerNode(Node):
@@ -407,6 +413,20 @@ class ControllerNode(Node):
                 return SetParametersResult(successful=False, reason=str(exc))
             self.get_logger().info(f"parameters changed: {sorted(changes)}")
         return SetParametersResult(successful=True)
+
+    def flush_on_exit(self):
+        """In a lockstep recording, wait until the recorder has every message published.
+
+        Called by :func:`.main.run_node` when the node stops (servo.launch.py stops it
+        once the simulator is done, and the recorder after it).
+        """
+        if not (self.lockstep and self.every_sample):
+            return
+        timeout = Duration(seconds=FLUSH_TIMEOUT)
+        for pub in (*self.publishers_by_topic.values(), self.diagnostics_pub):
+            if not pub.wait_for_all_acked(timeout):
+                self.get_logger().warning(f"{pub.topic_name}: not every message reached its "
+                                          f"subscribers within {FLUSH_TIMEOUT:g} s")
 
     def destroy_node(self):
         logging.getLogger("visual_adaptive_servo").removeHandler(self.log_handler)

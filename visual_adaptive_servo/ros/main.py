@@ -141,6 +141,9 @@ def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
             executor.spin_once(timeout_sec=SPIN_TIMEOUT)
         if stop.is_set():
             node.get_logger().info("interrupted: stopping")
+        flush = getattr(node, "flush_on_exit", None)
+        if flush is not None:
+            flush()
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
