@@ -677,6 +677,7 @@ class AdaptiveVisualTracker:
         self.designed = {}          # gains derived at the first joint sample (gain_design.py)
         self.gains = None           # complete once every gain is known (see reset)
         self.damping = None         # D of the joint-space damping, fixed at the first sample
+        self.fallback_bound = None  # largest stable fallback damping per joint, with D
         self.report = None          # the start-up report (start_report), at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self._law_backend = self._law_kernel = None     # _compiled_law
@@ -723,7 +724,7 @@ class AdaptiveVisualTracker:
         self.t_last_tau = None
         self.stale = False
         self._rejecting = ()        # kinds of problem of the current rejection streak
-        self.damping = None
+        self.damping = self.fallback_bound = None
         # complete before the first sample when the configuration gives every gain (D comes
         # at the first sample); otherwise once the missing ones are derived there
         self.designed = {}
@@ -1155,6 +1156,16 @@ class AdaptiveVisualTracker:
         gains = self._gains(D, designed)
         report = self.start_report(q, M_hat, gains)       # raises before anything is kept
         self.damping, self.designed, self.gains, self.report = D, designed, gains, report
+        self.fallback_bound = fallback_bound(M_hat, D, config["sample_time"])
+        capped = self.fallback_bound < config["safety.fallback_damping"]
+        if np.any(capped):
+            log.warning("safety.fallback_damping %g N m s/rad is more than the sampled-data "
+                        "bound of the light joints; the fallback uses %s there (T (D + d) / "
+                        "M_hat <= %g)", config["safety.fallback_damping"], ", ".join(
+                            f"{name} {b:.3g}" for name, b, c in zip(
+                                report.joint_names, self.fallback_bound.tolist(),
+                                capped.tolist()) if c),
+                        FALLBACK_STEP)
         fast = self._compiled_sample()
         if fast is not None:
             fast.prepare(gains, config, self.projection)    # packed now, not in a later sample
@@ -1345,10 +1356,32 @@ class AdaptiveVisualTracker:
             return np.zeros(n)
         zero = np.zeros(n)
         g_hat = self.model.dynamic_regressor(q, zero, zero, zero) @ self.state.a_d
-        tau = g_hat - self.config["safety.fallback_damping"] * qd
+        d = self.config["safety.fallback_damping"]
+        if self.fallback_bound is not None:
+            d = np.minimum(d, self.fallback_bound)
+        tau = g_hat - d * qd
         if self.damping is not None and np.any(self.damping):
             tau = tau - self.damping.dot(qd)
         return np.clip(tau, -self.config.torque_limit, self.config.torque_limit)
+
+
+#: the largest sampled-data step T (D + d) / M_hat of a joint under the fallback's damping
+FALLBACK_STEP = 0.5
+
+
+def fallback_bound(M_hat, D, sample_time):
+    """Per joint, the largest fallback damping d with T (D_jj + d) / M_hat_jj <= FALLBACK_STEP.
+
+    Pure damping on a sampled joint flips sign every sample and grows once T d / M
+    passes 2; a fixed d in N m s/rad is far past that on a light wrist (0.5 kg hand,
+    M about 1e-3 kg m^2: 5 N m s/rad at 1 ms is a step of 5).  The diagonal of the
+    initial estimate's inertia, with margin for its error; never negative.  No bound
+    (inf) on a joint whose estimated inertia is not positive: the estimate says nothing
+    there (the paper's arm starts with a_d = 0).
+    """
+    M_diag = np.diag(M_hat)
+    bound = np.maximum(FALLBACK_STEP * M_diag / sample_time - np.diag(D), 0.0)
+    return np.where(M_diag > 0.0, bound, np.inf)
 
 
 _TRACKER_LAW = AdaptiveVisualTracker._law
