@@ -14,11 +14,13 @@
 
 """Configuration: one YAML for both nodes, validated whole, refused with the name and rule."""
 
+import os
+
 import numpy as np
 import pytest
 import yaml
 
-from conftest import PAPER_CONFIG
+from conftest import PAPER_CONFIG, ROOT
 from visual_adaptive_servo.config.controller import CONTROLLER_PARAMS, ControllerConfig
 from visual_adaptive_servo.config.files import read_param_file
 from visual_adaptive_servo.config.scenario import load_scenario
@@ -53,7 +55,8 @@ def test_every_schema_entry_has_a_description():
 @pytest.mark.parametrize("override, message", [
     ("controller_node.alpha=3.0", r"controller_node\.alpha: Theorem 1 requires alpha > gamma/3"),
     ("controller_node.K=[0.001, 0.002, 0.003]", r"controller_node\.K: needs 2 values, got 3"),
-    ("controller_node.K=[0.001, 0.0]", r"controller_node\.K: every entry must be > 0"),
+    ("controller_node.K=[0.001, 0.0]",
+     r"controller_node\.K: every entry must be > 0 .*got \[0\.001, 0\.0\]$"),
     ("controller_node.gamma=-1.0", r"controller_node\.gamma: must be >= 0.0"),
     ("controller_node.Gamma_d=[1, 1]", r"controller_node\.Gamma_d: needs 8 values, got 2"),
     ("controller_node.model=ur5", r"controller_node\.model: unknown model name 'ur5'"),
@@ -88,6 +91,20 @@ def test_every_schema_entry_has_a_description():
 def test_invalid_values_are_refused_with_name_and_rule(override, message):
     with pytest.raises(ConfigError, match=message):
         load_scenario(PAPER_CONFIG, [override])
+
+
+def test_a_long_list_is_named_by_its_first_failing_entry():
+    # a 7-joint arm with three points has 66 a_z_perp gains: the message names the entry
+    # (counted from 0) and how many more fail, in plain numbers rather than 66 numpy reprs
+    for override, message in [
+            ("controller_node.Gamma_z_perp=0", r"controller_node\.Gamma_z_perp: every entry "
+             r"must be > 0 .*, entry 0 \(counted from 0\) is 0\.0, and 65 more of the 66 "
+             r"entries$"),
+            ("controller_node.Gamma_z=[" + ", ".join(["1.0"] * 20 + ["0.0"] + ["1.0"] * 13)
+             + "]", r"controller_node\.Gamma_z: .*, entry 20 \(counted from 0\) is 0\.0$")]:
+        with pytest.raises(ConfigError, match=message) as err:
+            load_scenario(os.path.join(ROOT, "config", "iiwa_3points.yaml"), [override])
+        assert "np.float64" not in str(err.value)
 
 
 def test_broken_files_are_refused(tmp_path):

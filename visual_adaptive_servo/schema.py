@@ -194,7 +194,26 @@ def require_length(values, name, length, section, scalar=False):
 def require_finite(values, name, section):
     """Every entry of ``values[name]`` is finite (ConfigError naming it otherwise)."""
     if values[name] is not None and not np.all(np.isfinite(values[name])):
-        raise ConfigError(f"{section}.{name}: must be finite")
+        raise ConfigError(f"{section}.{name}: must be finite, "
+                          f"{failing_entries(values[name], ~np.isfinite(values[name]))}")
+
+
+def failing_entries(values, failing):
+    """Which entries of a list parameter break a rule, for an error message.
+
+    ``failing``: a boolean mask over ``values`` with at least one True.  A list of a
+    few entries is shown whole (plain numbers, not numpy's reprs); a long one (a
+    7-joint arm's 66 kinematic gains) by its first failing entry and a count.
+    """
+    values = np.asarray(values, dtype=float)
+    bad = np.flatnonzero(failing)
+    if values.size <= 8:
+        return f"got {[float(v) for v in values]}"
+    first = int(bad[0])
+    text = f"entry {first} (counted from 0) is {float(values[first])}"
+    if bad.size > 1:
+        text += f", and {bad.size - 1} more of the {values.size} entries"
+    return text
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,8 +33,9 @@ from ..control.gain_design import DESIGNED, DesignSettings
 from ..control.trajectory import SinusoidTrajectory, TabulatedTrajectory, TRAJECTORY_TYPES
 from ..models import BACKENDS, make_model, MODEL_NAMES, RobotCameraModel, STRUCTURE_PARAMS
 from ..models.resources import resolve_path
-from ..schema import (CONTROLLER_SECTION, ConfigError, INF, ParamSpec, require_finite,
-                      require_length, resolve_params, TIMING_MODES, ValidatedParams)
+from ..schema import (CONTROLLER_SECTION, ConfigError, failing_entries, INF, ParamSpec,
+                      require_finite, require_length, resolve_params, TIMING_MODES,
+                      ValidatedParams)
 from .common import camera_specs, check_image_bounds, structure_specs
 
 FALLBACKS = ("gravity_compensation", "zero_torque")
@@ -322,14 +323,15 @@ class ControllerConfig(ValidatedParams):
             require_finite(v, name, section)
         for name in DESIGNED:
             if v[name] is not None and np.any(v[name] <= 0.0):
-                raise ConfigError(f"{section}.{name}: every entry must be > 0 "
-                                  f"(a positive definite gain), got {list(v[name])}")
+                raise ConfigError(f"{section}.{name}: every entry must be > 0 (a positive "
+                                  f"definite gain; leave it out to have it derived), "
+                                  f"{failing_entries(v[name], v[name] <= 0.0)}")
         for name in ("alpha", "gamma"):
             if v[name] <= 0.0:
                 raise ConfigError(f"{section}.{name}: must be > 0, got {v[name]}")
         if np.any(v["torque_limit"] <= 0.0):
             raise ConfigError(f"{section}.torque_limit: every entry must be > 0, "
-                              f"got {list(v['torque_limit'])}")
+                              f"{failing_entries(v['torque_limit'], v['torque_limit'] <= 0.0)}")
         check_alpha_gamma(v["alpha"], v["gamma"], section)
         lower, upper = v["motion_scale.lower"], v["motion_scale.upper"]
         if not lower <= v["motion_scale.initial"] <= upper:
@@ -346,9 +348,11 @@ class ControllerConfig(ValidatedParams):
             if np.any(lo > hi):
                 raise ConfigError(f"{section}.projection.{name}_min: must be <= "
                                   f"projection.{name}_max element-wise")
-            if v["projection.enabled"] and np.any((init < lo) | (init > hi)):
+            outside = (init < lo) | (init > hi)
+            if v["projection.enabled"] and np.any(outside):
                 raise ConfigError(f"{section}.{name}_init: must lie within "
-                                  f"projection.{name}_min/_max, got {list(init)}")
+                                  f"projection.{name}_min/_max, "
+                                  f"{failing_entries(init, outside)}")
         trajectory = _trajectory(v, model.m, section, search_dirs)
         return cls(v, model, trajectory, tuple(search_dirs),
                    frozenset(name for name, value in params.items() if value is not None))
