@@ -120,7 +120,10 @@ SCENARIO = """sim_node:
       omega: 0.5
     image_bounds: [0.0, 640.0, 0.0, 480.0]
     min_singular_value: 5.0
-"""
+{torque_limit}"""
+
+#: no saturation: the fallback's own torque is what these tests measure
+NO_LIMIT = "    torque_limit: [.inf, .inf, .inf]\n"
 
 
 def test_the_bound_keeps_every_joint_within_the_step_and_leaves_unknown_inertia_alone():
@@ -136,11 +139,11 @@ def test_the_bound_keeps_every_joint_within_the_step_and_leaves_unknown_inertia_
     assert fallback_bound(M_hat, np.diag([2000.0, 1.0, 0.0]), T)[0] == 0.0
 
 
-def _scenario(tmp_path):
+def _scenario(tmp_path, torque_limit=NO_LIMIT):
     (tmp_path / "arm.urdf").write_text(URDF)
     path = tmp_path / "arm.yaml"
     path.write_text(SCENARIO.format(camera=CAMERA, estimated_camera="".join(
-        "  " + line + "\n" for line in CAMERA.splitlines())))
+        "  " + line + "\n" for line in CAMERA.splitlines()), torque_limit=torque_limit))
     return load_scenario(str(path))
 
 
@@ -171,3 +174,26 @@ def test_a_light_wrist_held_by_the_fallback_until_a_late_first_frame_stays_bound
     assert fixed["diverged"]
     assert pytest.approx(0.046, abs=0.01) == float(
         fixed["divergence_reason"].split("at t=")[1].split(";")[0])
+
+
+def test_without_a_torque_limit_the_urdf_effort_limits_saturate_the_command(
+        tmp_path, monkeypatch):
+    scenario = _scenario(tmp_path, torque_limit="")
+    np.testing.assert_array_equal(scenario.controller.torque_limit, [80.0, 60.0, 30.0])
+    given = _scenario(tmp_path, torque_limit="    torque_limit: 500.0\n")
+    np.testing.assert_array_equal(given.controller.torque_limit, [500.0] * 3)
+    tracker = controller.AdaptiveVisualTracker(scenario.controller)
+    lines = tracker.start(scenario.sim.initial_positions).lines()
+    assert ("torque limit: yaw 80, pitch 60, roll 30 N m (the URDF's <limit effort>, as "
+            "torque_limit is not given)") in lines
+    # the oracle of the test above: the fixed fallback damping's sign-flipping wrist torque
+    # diverges without a limit; with the URDF's limits every command stays within them
+    monkeypatch.setattr(controller, "fallback_bound",
+                        lambda M_hat, D, sample_time: np.full(len(D), np.inf))
+    summary = run_scenario(scenario, str(tmp_path / "limited"), 0.1, progress=False,
+                           record=False, plots=False)
+    unlimited = run_scenario(_scenario(tmp_path), str(tmp_path / "unlimited"), 0.1,
+                             progress=False, record=False, plots=False)
+    assert unlimited["diverged"]
+    assert not summary["diverged"], summary.get("divergence_reason")
+    assert summary["max_abs_torque"] <= 80.0

@@ -247,6 +247,42 @@ def test_unreadable_urdf_is_refused(tmp_path):
         load_chain(str(bad), "a", "a", section="sim_node")
 
 
+def test_effort_limits_are_read_as_pybullet_reads_them():
+    urdf = os.path.join(DATA, "kuka_iiwa/model.urdf")
+    chain = load_chain(urdf, "lbr_iiwa_link_0", "lbr_iiwa_link_7")
+    client = pybullet.connect(pybullet.DIRECT)
+    try:
+        body = pybullet.loadURDF(urdf, useFixedBase=True, physicsClientId=client)
+        info = {pybullet.getJointInfo(body, j, physicsClientId=client)[1].decode():
+                pybullet.getJointInfo(body, j, physicsClientId=client)[10]
+                for j in range(pybullet.getNumJoints(body, physicsClientId=client))}
+    finally:
+        pybullet.disconnect(client)
+    assert chain.effort_limits == tuple(info[name] for name in chain.joint_names)
+    # the paper's arm has continuous joints without <limit>: no limit
+    paper = load_chain(os.path.join(URDF_DIR, "paper_rrr.urdf"), "base_link", "tip")
+    assert paper.effort_limits == (np.inf,) * 3
+
+
+@pytest.mark.parametrize("limit, effort", [
+    ('<limit effort="0" velocity="1"/>', np.inf),     # URDFs write 0 for "not given"
+    ('<limit effort="12.5" velocity="1"/>', 12.5),
+    ('<limit effort="-3" velocity="1"/>', r"joint 'joint2' has <limit effort='-3'>"),
+    ('<limit effort="strong" velocity="1"/>', r"joint 'joint2' has <limit effort='strong'>"),
+])
+def test_an_effort_limit_of_zero_is_none_and_a_bad_one_is_refused(tmp_path, limit, effort):
+    text = open(os.path.join(URDF_DIR, "paper_rrr.urdf")).read()
+    at = text.index("</joint>", text.index('<joint name="joint2"'))
+    path = tmp_path / "arm.urdf"
+    path.write_text(text[:at] + limit + text[at:])
+    if isinstance(effort, str):
+        with pytest.raises(ValueError, match="controller_node\\.urdf: " + effort):
+            load_chain(str(path), "base_link", "tip", section="controller_node")
+    else:
+        chain = load_chain(str(path), "base_link", "tip")
+        assert chain.effort_limits == (np.inf, effort, np.inf)
+
+
 def test_pybullet_sees_the_synthetic_chain_with_its_fixed_mount(synthetic_urdf):
     """The reader's root->base transform is where PyBullet puts the base link."""
     chain = load_chain(synthetic_urdf, "base", "tool")

@@ -199,8 +199,10 @@ CONTROLLER_PARAMS = (
               scalar=True),
     ParamSpec("projection.min_depth", 0.1, "float",
               "Smallest allowed estimated depth z_hat_i [m].", 1e-6, None),
-    ParamSpec("torque_limit", lambda m, v: [INF] * m.n, "float_list",
-              "Per-joint |tau| limit [N m], or one number; the command saturates there.", 0.0,
+    ParamSpec("torque_limit", lambda m, v: list(getattr(m, "effort_limits", [INF] * m.n)),
+              "float_list",
+              "Per-joint |tau| limit [N m], or one number; the command saturates there.  Left "
+              "out: the URDF's <limit effort> of each joint (none where it gives none).", 0.0,
               None, True, scalar=True),
     ParamSpec("min_singular_value", 0.0, "float",
               "Damp the pseudo-inverse of J* when its smallest singular value drops below "

@@ -573,6 +573,8 @@ class StartReport:
     margin_joint: np.ndarray    # T B_jj / M_hat_jj per joint
     joint_names: tuple
     departures: tuple = ()      # the options on that depart from the paper, as "name value"
+    torque_limit: tuple = ()    # |tau| limit per joint in effect [N m] (inf: none)
+    torque_limit_source: str = "given"  # "given", "urdf" (<limit effort>) or "none"
 
     def lines(self):
         """The report as text lines."""
@@ -598,6 +600,18 @@ class StartReport:
             out.append("sampled-data step (T M_hat^-1 B): not checked, the initial estimate's "
                        "inertia M_hat is not positive definite (initial_estimate.a_d gives the "
                        "arm no mass)")
+        if self.torque_limit:
+            limits = np.asarray(self.torque_limit, dtype=float)
+            if not np.any(np.isfinite(limits)):
+                out.append("torque limit: none (no torque_limit, and the URDF gives no <limit "
+                           "effort>): the command is never saturated")
+            else:
+                source = {"urdf": "the URDF's <limit effort>, as torque_limit is not given",
+                          "given": "torque_limit"}.get(self.torque_limit_source,
+                                                       self.torque_limit_source)
+                out.append("torque limit: " + ", ".join(
+                    f"{name} {lim:g}" for name, lim in zip(self.joint_names, limits.tolist()))
+                    + f" N m ({source})")
         out.append("departures from the paper (docs/robust_adaptation.md): "
                    + (", ".join(self.departures) if self.departures else "none"))
         return out
@@ -1236,10 +1250,13 @@ class AdaptiveVisualTracker:
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
                               f"start_factor {self.scale.start_factor:g})")
+        limit = tuple(config["torque_limit"].tolist())
+        limit_source = ("given" if "torque_limit" in explicit
+                        else "urdf" if any(np.isfinite(limit)) else "none")
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,
-                             tuple(departures))
+                             tuple(departures), limit, limit_source)
         # one record: a node forwards the core's logging throttled per call site
         log.info("start-up report:\n  %s", "\n  ".join(report.lines()))
         return report

@@ -135,6 +135,11 @@ class UrdfArmCamera(RobotCameraModel):
         return self.chain.joint_names
 
     @property
+    def effort_limits(self):
+        """The URDF's ``<limit effort>`` per joint; inf where it gives none."""
+        return self.chain.effort_limits
+
+    @property
     def backend(self):
         """``"compiled"`` or ``"numpy"``: what :meth:`kinematic_tensors` runs."""
         return self.kinematics.backend

@@ -67,6 +67,7 @@ class ChainJoint:
     origin_translation: np.ndarray  # (3,) t_o, in the frame before the joint [m]
     axis: np.ndarray                # (3,) unit, in the joint's own frame
     folded: tuple = ()              # names of the fixed joints folded into this origin
+    effort: float = float("inf")    # <limit effort> [N m or N]; inf: none given (or 0)
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,11 @@ class KinematicChain:
     @property
     def joint_names(self):
         return tuple(j.name for j in self.joints)
+
+    @property
+    def effort_limits(self):
+        """Each joint's ``<limit effort>`` [N m, N for a prismatic joint]; inf where none."""
+        return tuple(j.effort for j in self.joints)
 
     def frames(self, q):
         """Rotations (n+1, 3, 3) and origins (n+1, 3) of frames 0..n in the base frame."""
@@ -204,13 +210,32 @@ def load_chain(urdf_path, base_link, tip_link, section="urdf"):
         if norm == 0.0:
             raise ValueError(f"{section}.urdf: joint {joint.get('name')!r} has a zero axis")
         joints.append(ChainJoint(joint.get("name"), kind == "prismatic", rotation, translation,
-                                 axis / norm, tuple(folded)))
+                                 axis / norm, tuple(folded), _effort(joint, section)))
         rotation, translation, folded = np.eye(3), np.zeros(3), []
     if not joints:
         raise ValueError(f"{section}.tip_link: no revolute or prismatic joint between "
                          f"{base_link!r} and {tip_link!r} in {urdf_path}")
     return KinematicChain(urdf_path, base_link, tip_link, tuple(joints), rotation, translation,
                           tuple(folded), root_link, root_to_base)
+
+
+def _effort(joint, section):
+    """The joint's ``<limit effort>``; inf without one, or with 0 (URDFs write 0 for "unset").
+
+    A value that is not a number or is negative is refused naming the joint.
+    """
+    limit = joint.find("limit")
+    text = None if limit is None else limit.get("effort")
+    if text is None:
+        return float("inf")
+    try:
+        effort = float(text)
+    except ValueError:
+        effort = float("nan")
+    if not effort >= 0.0:
+        raise ValueError(f"{section}.urdf: joint {joint.get('name')!r} has <limit effort="
+                         f"{text!r}>: must be a number >= 0")
+    return effort if effort > 0.0 else float("inf")
 
 
 def _origin(joint):
