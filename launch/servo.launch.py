@@ -110,6 +110,7 @@ def _nodes(context):
         nodes.append(Node(package=PACKAGE, executable="feature_detector",
                           name="feature_detector", output="screen",
                           parameters=[params_file, {"timing_mode": timing_mode,
+                                                    "recorded": record,
                                                     **node_parameters(context)}]))
     actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
                            f"{camera_mode}")]

@@ -208,6 +208,28 @@ def test_tuning_parameters_change_while_running_and_bad_sets_are_refused(context
         node.destroy_node()
 
 
+@pytest.mark.parametrize("timing_mode, recorded, depth, reliable", [
+    ("lockstep", True, 2000, True),     # every frame in the bag, as the simulator's topics
+    ("lockstep", False, 10, True),
+    ("realtime", True, 5, False),       # sensor data: a recorder takes what it can
+])
+def test_a_recorded_lockstep_run_keeps_the_features_for_a_recorder_that_falls_behind(
+        context, timing_mode, recorded, depth, reliable):
+    from rclpy.qos import ReliabilityPolicy
+    from visual_adaptive_servo.ros.executor import RECORDED_DEPTH
+
+    node = FeatureDetectorNode(context=context, parameter_overrides=[
+        Parameter("timing_mode", value=timing_mode), Parameter("recorded", value=recorded)])
+    try:
+        qos = node.features_pub.qos_profile
+        assert qos.depth == depth
+        assert (qos.reliability == ReliabilityPolicy.RELIABLE) == reliable
+        if recorded and timing_mode == "lockstep":
+            assert depth == RECORDED_DEPTH
+    finally:
+        node.destroy_node()
+
+
 @pytest.mark.parametrize("name, value, match", [
     ("markers.colors", [255.0, 0.0, 0.0, 0.0],
      r"feature_detector\.markers\.colors: needs 3 values per marker, got 4"),

@@ -62,6 +62,10 @@ DETECTOR_PARAMS = (
               "QoS of the image subscription and the features publisher; must match the "
               "camera's and the controller's (lockstep: reliable; realtime: best-effort "
               "sensor data)."),
+    ParamSpec("recorded", False, "bool",
+              "Lockstep: a recorder keeps every message of this run (servo.launch.py "
+              "record:=true); /camera/features then keeps 2000 messages for subscribers that "
+              "fall behind, as the other recorded topics do (ros/executor.py RECORDED)."),
 )
 
 

@@ -40,7 +40,9 @@ out: ``/camera/features`` (geometry_msgs/PolygonStamped, one Point32 (u, v, 0) p
 QoS: ``timing_mode: lockstep`` makes the image subscription and the features
 (and overlay) publishers reliable (depth 10), ``realtime`` makes them sensor
 data (best effort, depth 5), as for the other nodes' measurements; the
-controller and the camera driver must use the same.
+controller and the camera driver must use the same.  A lockstep run that is
+recorded (``recorded: true``) keeps 2000 features messages, so a recorder that
+falls behind loses none (ros/executor.py ``RECORDED``; the pictures keep 10).
 
 Lockstep (the simulator's rendered mode): after each image, features or not,
 the node publishes ``~/processed`` (std_msgs/Header with the image's stamp),
@@ -73,6 +75,7 @@ from ..recording import messages as m
 from ..schema import ConfigError, DETECTOR_SECTION
 from ..vision.detection import image_points
 from ..vision.overlay import COLOR_DESIRED, COLOR_MEASURED, COLOR_OBSERVED, draw_points
+from .executor import RECORDED
 from .main import run_node
 from .params import declare_schema, runtime_changes
 
@@ -93,7 +96,9 @@ class FeatureDetectorNode(Node):
 
         self.lockstep = self.params["timing_mode"] == "lockstep"
         qos = RELIABLE if self.lockstep else qos_profile_sensor_data
-        self.features_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features", qos)
+        features_qos = RECORDED if self.lockstep and self.params["recorded"] else qos
+        self.features_pub = self.create_publisher(msgs.PolygonStamped, "/camera/features",
+                                                  features_qos)
         self.processed_pub = (self.create_publisher(msgs.Header, "~/processed", RELIABLE)
                               if self.lockstep else None)
         self.diagnostics_pub = self.create_publisher(msgs.DiagnosticArray, "/diagnostics",
