@@ -113,6 +113,12 @@ CONTROLLER_PARAMS = (
     ParamSpec("joint_damping.diagonal", lambda m, v: [0.0] * m.n, "float_list",
               "A constant diagonal added to that damping [N m s/rad].", 0.0, None,
               scalar=True),
+    ParamSpec("joint_damping.integral_rate", 10.0, "float",
+              "k_i: eq (22) also gets -k_i D int s dt, the joint damping D acting on the "
+              "integral of the joint velocity error (not in the paper; no effect without D): "
+              "a wrong estimate of the dynamics no longer leaves a torque error the image loop "
+              "must absorb.  Keeps Theorem 1 (docs/robust_adaptation.md) [1/s]; 0 = off.",
+              0.0, None),
     ParamSpec("gamma", lambda m, v: DesignSettings.from_values(v).bandwidths()[1], "float",
               "Reference gain gamma of eq (18); alpha > gamma/3.  Default: "
               "min(gain_design.gamma_max, gain_design.delay_bandwidth / tau).", 0.0, None),

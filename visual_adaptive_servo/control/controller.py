@@ -618,7 +618,8 @@ class StartReport:
 
 
 #: the numeric options that depart from the paper when > 0 (docs/robust_adaptation.md)
-DEPARTURES = ("joint_damping.inertia_rate", "reference.integral_rate",
+DEPARTURES = ("joint_damping.inertia_rate", "joint_damping.integral_rate",
+              "reference.integral_rate",
               "robust.leakage_kinematic", "robust.leakage_dynamic")
 
 
@@ -729,6 +730,10 @@ class AdaptiveVisualTracker:
         self._fast_prev = None
         self.rates = None
         self.e_int = np.zeros(2 * self.model.m)   # integral of x_o - x_d (reference.integral)
+        # the joint integral: int s dt (joint_damping.integral_rate) and the s it integrates
+        # next (the last sample's, 0 when that sample saturated: no wind-up)
+        self.joint_int = np.zeros(self.model.n)
+        self._s_int = np.zeros(self.model.n)
         self._xd_last = None
         self._fast_sample = None    # (array, layout) of this sample's compiled sample, if any
         self.desired = None
@@ -976,10 +981,11 @@ class AdaptiveVisualTracker:
                 return self._sample_compiled(fast, t, q, qd, x, with_frame, store)
         if tensors is None:
             tensors = self.model.kinematic_tensors(q, qd)
-        e_int = self.e_int
+        e_int, joint_int = self.e_int, self.joint_int
         if restarting:
             state = replace(self.state, x_obs=x.copy())
             e_int = np.zeros_like(e_int)
+            joint_int = np.zeros_like(joint_int)
             blend = (self.config.start_blend_time if self.t_last is None
                      else self.config["safety.recovery_blend_time"])
             desired = BlendedStart.from_measurement(self.trajectory, x, t, blend,
@@ -992,6 +998,7 @@ class AdaptiveVisualTracker:
                 self.scale.advance(dt)
             if self._integral:
                 e_int = e_int + dt * (self.state.x_obs - self._xd_last)
+            joint_int = joint_int + dt * self._s_int
         projection = self.projection
         if projection is not None:
             if projection.interior(state, tensors[0]):
@@ -1006,13 +1013,17 @@ class AdaptiveVisualTracker:
         except np.linalg.LinAlgError:
             return self._reject(t, q, qd, ["J* is singular (set min_singular_value > 0 to damp "
                                            "its pseudo-inverse; state kept)"])
-        torques = out.tau.tolist()
+        tau_law = out.tau
+        if self._joint_integral > 0.0:
+            # joint_damping.integral_rate: eq (22) - k_i D int s dt (docs/robust_adaptation.md)
+            tau_law = tau_law - self._joint_integral * self.gains.D.dot(joint_int)
+        torques = tau_law.tolist()
         if not (_all_finite(torques) and out.rates.is_finite() and state.is_finite()):
             return self._reject(t, q, qd, ["controller update is not finite (state kept)"])
 
         limit = self.config["torque_limit"]
         saturated = not all(-lim <= v <= lim for v, lim in zip(torques, limit.tolist()))
-        tau = np.clip(out.tau, -limit, limit) if saturated else out.tau
+        tau = np.clip(tau_law, -limit, limit) if saturated else tau_law
         self._model_rate = out.model_rate
         # commit
         if restarting and self.stale:
@@ -1020,19 +1031,21 @@ class AdaptiveVisualTracker:
         self.desired = desired
         self.state, self.rates, self.t_last = state, out.rates, t
         self.e_int, self._xd_last = e_int, xd
+        self.joint_int = joint_int
+        self._s_int = np.zeros_like(joint_int) if saturated else np.array(out.s, dtype=float)
         self._accepted(t, with_frame, tau)
         fast = self._compiled_sample()
         if fast is not None:
             # what the next sample, compiled, reads of this one
             self._fast_prev, self._fast_layout = fast.record(
-                _flat_of(state), _flat_of(out.rates), e_int, xd), fast
+                _flat_of(state), _flat_of(out.rates), e_int, xd, joint_int, self._s_int), fast
         else:
             self._fast_prev = None
         return _frozen(StepResult, {
             "t": t, "tau": tau, "x_d": xd, "x_obs": state.x_obs, "error": x - xd,
             "z_hat": out.z_hat, "state": state, "status": "ok", "problems": (),
             "saturated": saturated, "projection_active": out.projection_active,
-            "damped": out.damped, "sigma_min": out.sigma_min, "tau_unsaturated": out.tau,
+            "damped": out.damped, "sigma_min": out.sigma_min, "tau_unsaturated": tau_law,
             "flags": {}, "motion_scale": self._scale_value})
 
     def _accepted(self, t, with_frame, tau):
@@ -1088,6 +1101,7 @@ class AdaptiveVisualTracker:
         self._model_rate = None         # the predictor's rate is in res (_step_predicted)
         self._fast_prev, self._fast_layout, self._fast_sample = res, fast, (res, fast)
         self.state, self._rates, self._e_int, self._xd, self.t_last = state, None, None, None, t
+        self._joint_int = self._sint = None
         unsaturated = res[fast.tau_unsaturated]
         tau = res[fast.tau] if saturated else unsaturated     # as _sample: the same array
         self._accepted(t, with_frame, tau)
@@ -1121,6 +1135,11 @@ class AdaptiveVisualTracker:
                      lambda self, value: setattr(self, "_e_int", value))
     _xd_last = property(lambda self: self._last("_xd", "xd"),
                         lambda self, value: setattr(self, "_xd", value))
+    #: int s dt of joint_damping.integral_rate, and the s it integrates at the next sample
+    joint_int = property(lambda self: self._last("_joint_int", "joint_int"),
+                         lambda self, value: setattr(self, "_joint_int", value))
+    _s_int = property(lambda self: self._last("_sint", "s_int"),
+                      lambda self, value: setattr(self, "_sint", value))
 
     def _compiled_sample(self):
         """The :class:`~.sample_kernels.CompiledSample` of this tracker, or None.
@@ -1244,7 +1263,8 @@ class AdaptiveVisualTracker:
                  "Gamma_d": g.Gamma_d, "Gamma_z_perp": g.Gamma_z_perp, "Gamma_z": g.Gamma_z}
         derived = tuple(name for name in gains if name not in explicit
                         and not (name == "Gamma_d" and "Gamma_d_normalized" in explicit))
-        departures = [f"{name} {config[name]:g}" for name in DEPARTURES if config[name] > 0.0]
+        departures = [f"{name} {config[name]:g}" for name in DEPARTURES if config[name] > 0.0
+                      and (g.D is not None or name != "joint_damping.integral_rate")]
         if self.scale is not None:
             departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
@@ -1281,6 +1301,11 @@ class AdaptiveVisualTracker:
     @property
     def _integral(self):
         return self.config["reference.integral_rate"] > 0.0
+
+    @property
+    def _joint_integral(self):
+        """k_i of joint_damping.integral_rate in effect: 0 without a joint damping D."""
+        return self.config["joint_damping.integral_rate"] if self.gains.D is not None else 0.0
 
     def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int=None):
         """The control law evaluated by :meth:`step` at time ``t`` (baselines override this).

@@ -55,15 +55,16 @@ SINUSOID, TABLE = 0, 1
 # the packed pieces, in the order of the header (see _pack_pieces)
 _FLOAT = ("A", "B", "C", "axes", "revolute", "dirs", "moves", "known", "gains", "bounds",
           "law_scalars", "joints", "torque_limit", "trajectory", "knots", "x_end",
-          "trajectory_scalars")
+          "trajectory_scalars", "joint_integral")
 _INT = ("frame", "prismatic", "z_index", "perp_index", "columns", "sizes")
 (_A, _B, _C, _AXES, _REVOLUTE, _DIRS, _MOVES, _KNOWN, _GAINS, _BOUNDS, _LAW_SCALARS, _JOINTS,
- _TORQUE_LIMIT, _TRAJECTORY_COEF, _KNOTS, _X_END, _TRAJECTORY_SCALARS) = range(len(_FLOAT))
+ _TORQUE_LIMIT, _TRAJECTORY_COEF, _KNOTS, _X_END, _TRAJECTORY_SCALARS,
+ _JOINT_INTEGRAL) = range(len(_FLOAT))
 (_FRAME, _PRISMATIC, _Z_INDEX, _PERP_INDEX, _COLUMNS, _SIZES) = range(
     len(_FLOAT), len(_FLOAT) + len(_INT))
 #: entries of the "sizes" piece
 (_NS, _LAW_SIZE, _P_PERP, _P_Z, _P_D, _KIND, _HAS_W0, _TRAJECTORY, _PERIODIC, _PROJECT,
- _INTEGRAL, _O_TAU, _O_XD, _O_EINT, _O_ERR, _O_SPEED, _O_RATE) = range(17)
+ _INTEGRAL, _O_TAU, _O_XD, _O_EINT, _O_ERR, _O_SPEED, _O_RATE, _O_JOINT_INT) = range(18)
 
 
 @compiled(inline="always")
@@ -219,6 +220,7 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot
     o_out = ns
     o_tau, o_xd, o_eint = sizes[_O_TAU], sizes[_O_XD], sizes[_O_EINT]
     o_err, o_speed, o_rate = sizes[_O_ERR], sizes[_O_SPEED], sizes[_O_RATE]
+    o_jint = sizes[_O_JOINT_INT]
     state = res[:ns]
     # EstimatorState.advanced: x + dt x_dot, the rates at the last sample (law output rates)
     for i in range(ns):
@@ -230,6 +232,10 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot
             e_int[r] = prev[o_eint + r] + dt * (prev[r] - prev[o_xd + r])
         else:
             e_int[r] = prev[o_eint + r]
+    # the joint integral of s (joint_damping.integral_rate), with the s the last sample left
+    joint_int = res[o_jint:o_jint + n]
+    for k in range(n):
+        joint_int[k] = prev[o_jint + k] + dt * prev[o_jint + n + k]
     # the model's kinematic tensors
     if sizes[_KIND] == PAPER:
         H, dH, dH_rate, W, W_rate = paper_tensors(q, qd)
@@ -298,16 +304,31 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot
         state[m2 + pp + pz:ns], q, qd, x, xd, xd_dot, xd_ddot, e_int, s, s_dot,
         s_ref, s_ref_dot, _view1(cf, ci, _GAINS), bounds, law_scalars, project,
         _view2(cf, ci, _JOINTS), _view1(ci, ci, _COLUMNS), out)
+    # the command before saturation: the law's torque, with - k_i D int s dt of
+    # joint_damping.integral_rate (D, n x n row-major, ends the law's gains)
+    tau_law = res[o_jint + 2 * n:o_jint + 3 * n]
+    k_i = _view1(cf, ci, _JOINT_INTEGRAL)[0]
+    if k_i != 0.0:
+        gains = _view1(cf, ci, _GAINS)
+        o_d = gains.shape[0] - n * n
+        for k in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += gains[o_d + k * n + j] * joint_int[j]
+            tau_law[k] = out[k] - k_i * acc
+    else:
+        for k in range(n):
+            tau_law[k] = out[k]
     # finiteness: the torque entry by entry when its sum is not (as _all_finite), the rates and
     # the state by their sums (as EstimatorState.is_finite)
     total = 0.0
     for k in range(n):
-        total += out[k]
+        total += tau_law[k]
     finite = math.isfinite(total)
     if not finite:
         finite = True
         for k in range(n):
-            finite = finite and math.isfinite(out[k])
+            finite = finite and math.isfinite(tau_law[k])
     total = 0.0
     for i in range(ns):
         total += out[n + i]
@@ -322,13 +343,17 @@ def sample(cf, ci, blend, prev, res, q, qd, x, t, dt, s, s_dot, s_ref, s_ref_dot
     limit = _view1(cf, ci, _TORQUE_LIMIT)
     saturated = False
     for k in range(n):
-        if not (-limit[k] <= out[k] <= limit[k]):
+        if not (-limit[k] <= tau_law[k] <= limit[k]):
             saturated = True
     for k in range(n):
-        v = out[k]
+        v = tau_law[k]
         if saturated:
             v = min(max(v, -limit[k]), limit[k])
         res[o_tau + k] = v
+    # the s the next sample integrates: none after a saturated command (no wind-up)
+    o_s = n + ns
+    for k in range(n):
+        res[o_jint + n + k] = 0.0 if saturated else out[o_s + k]
     # what the step reports, the motion scale's path and the frame predictor store
     rate = out[size - 3 * m2:size]                   # J_perp q_dot, Z_hat_dot, Z_hat
     for r in range(m2):
@@ -386,8 +411,10 @@ class CompiledSample:
     a_z_perp, a_z, a_d: ``ns``), the law's output (:class:`.law_kernels.CompiledLaw`:
     tau, the four rates, s, qr_dot, qr_ddot, J*, z_hat, the model rate), the
     saturated torque (n), x_d, x_d_dot, x_d_ddot, the integral e_int, the error
-    x - x_d, the motion scale's speed (2m each), and the rate the frame predictor
-    stores (3 x 2m, scaled by s).
+    x - x_d, the motion scale's speed (2m each), the rate the frame predictor
+    stores (3 x 2m, scaled by s), the joint integral int s dt and the s the next
+    sample integrates (n each), and the command before saturation (n: the law's
+    torque with the joint integral's term).
     """
 
     #: the kernel (:func:`sample`)
@@ -409,13 +436,14 @@ class CompiledSample:
         o_err = o_eint + m2
         o_speed = o_err + m2
         o_rate = o_speed + m2
-        self.size = o_rate + 3 * m2
-        self._offsets = [o_tau, o_xd, o_eint, o_err, o_speed, o_rate]
+        o_jint = o_rate + 3 * m2
+        self.size = o_jint + 3 * n
+        self._offsets = [o_tau, o_xd, o_eint, o_err, o_speed, o_rate, o_jint]
         self.state = slice(0, ns)
         self.x_obs = slice(0, m2)
         self.out = slice(o_out, o_tau)
         self.rates = slice(o_out + n, o_out + n + ns)
-        self.tau_unsaturated = slice(o_out, o_out + n)
+        self.tau_unsaturated = slice(o_jint + 2 * n, o_jint + 3 * n)    # with the integral
         self.z_hat = slice(o_out + law_kernel._z_hat.start, o_out + law_kernel._z_hat.stop)
         self.model_rate = slice(o_out + law_kernel._rate.start, o_out + law_kernel._rate.stop)
         self.tau = slice(o_tau, o_tau + n)
@@ -424,6 +452,8 @@ class CompiledSample:
         self.error = slice(o_err, o_err + m2)
         self.speed = slice(o_speed, o_speed + m2)
         self.commit_rate = slice(o_rate, o_rate + 3 * m2)
+        self.joint_int = slice(o_jint, o_jint + n)
+        self.s_int = slice(o_jint + n, o_jint + 2 * n)
         self._trajectory = trajectory
         if isinstance(trajectory, SinusoidTrajectory):
             self._trajectory_pieces = (SINUSOID, 0, trajectory._coefficients,
@@ -482,11 +512,12 @@ class CompiledSample:
         else:
             bounds, min_depth = law._bounds, 0.0
         flat, scalars = law._pack(gains, kappa, min_singular_value, min_depth)
+        k_i = config["joint_damping.integral_rate"] if gains.D is not None else 0.0
         self.cf, self.ci = self._pack(flat, scalars, bounds, torque_limit,
-                                      projection is not None, kappa > 0.0)
+                                      projection is not None, kappa > 0.0, k_i)
         self.key = (gains, config)
 
-    def _pack(self, flat, scalars, bounds, torque_limit, project, integral):
+    def _pack(self, flat, scalars, bounds, torque_limit, project, integral, k_i):
         law = self.law
         joints, columns = law.chain
         kind, periodic, coef, knots, x_end, traj_scalars = self._trajectory_pieces
@@ -495,7 +526,7 @@ class CompiledSample:
         floats = [self._A, self._B, self._C, self._axes, self._revolute, self._dirs,
                   self._moves, self._known, flat, bounds, scalars, joints,
                   np.broadcast_to(np.asarray(torque_limit, dtype=float), (self.n,)), coef,
-                  knots, x_end, traj_scalars]
+                  knots, x_end, traj_scalars, np.array([float(k_i)])]
         ints = [self._frame, self._prismatic, self._z_index, self._perp_index, columns, sizes]
         return _pack_pieces(floats, ints)
 
@@ -512,13 +543,15 @@ class CompiledSample:
             raise TypeError("x_d is not the tracker's trajectory")
         self.blend = blend
 
-    def record(self, state_flat, rates_flat, e_int, xd):
+    def record(self, state_flat, rates_flat, e_int, xd, joint_int, s_int):
         """A sample's array holding what the next :func:`sample` reads (after a Python sample)."""
         res = np.zeros(self.size)
         res[self.state] = state_flat
         res[self.rates] = rates_flat
         res[self.e_int] = e_int
         res[self.xd] = xd
+        res[self.joint_int] = joint_int
+        res[self.s_int] = s_int
         return res
 
     def _warm(self):
@@ -527,7 +560,7 @@ class CompiledSample:
         p_perp, p_z, p_d = self.law.sizes
         flat = np.ones(m2 + 3 * (p_perp + p_z + p_d) + n * n)
         scalars = np.concatenate([np.ones(8), [float(self._kind)], self.law.gravity])
-        cf, ci = self._pack(flat, scalars, self.law._bounds, np.ones(n), True, True)
+        cf, ci = self._pack(flat, scalars, self.law._bounds, np.ones(n), True, True, 1.0)
         prev = np.zeros(self.size)
         prev[self.state] = 1.0
         try:
