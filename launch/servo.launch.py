@@ -62,7 +62,7 @@ from launch.actions import (
     RegisterEventHandler,
     TimerAction,
 )
-from launch.event_handlers import OnProcessExit
+from launch.event_handlers import OnProcessExit, OnShutdown
 from launch.events import matches_action, Shutdown
 from launch.events.process import SignalProcess
 from launch.substitutions import LaunchConfiguration
@@ -134,8 +134,12 @@ def _nodes(context):
             cmd += ["-o", bag_dir]
         topics = sorted(TOPICS)
         if timing_mode == "lockstep":
-            # every period: keep all until written (the publishers keep 2000, ros/executor.py)
-            cmd += ["--qos-profile-overrides-path", recorder_qos_overrides(topics)]
+            # every period: keep all until written (the publishers keep 2000, ros/executor.py);
+            # the file, written now, is removed when the launch shuts down
+            overrides = recorder_qos_overrides(topics)
+            cmd += ["--qos-profile-overrides-path", overrides]
+            actions.append(RegisterEventHandler(OnShutdown(
+                on_shutdown=lambda event, context, path=overrides: _remove(path))))
         if camera_mode == "rendered":
             topics += sorted(CAMERA_TOPICS)
             cmd += ["--storage-preset-profile", "zstd_fast"]
@@ -143,6 +147,14 @@ def _nodes(context):
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
     return nodes + actions
+
+
+def _remove(path):
+    """Delete a file the launch wrote, if it is still there (no actions to run)."""
+    try:
+        os.remove(path)
+    except FileNotFoundError:
+        pass
 
 
 def generate_launch_description():

@@ -79,6 +79,7 @@ def _short_params_file(folder):
 def generate_test_description():
     folder = tempfile.mkdtemp(prefix="vas-record-")
     params_file, bag_dir = _short_params_file(folder), os.path.join(folder, "bag")
+    overrides_before = _overrides_files()
     return LaunchDescription([
         SetEnvironmentVariable("ROS_DOMAIN_ID", str(100 + os.getpid() % 50)),
         IncludeLaunchDescription(
@@ -86,7 +87,15 @@ def generate_test_description():
             launch_arguments={"params_file": params_file, "record": "true",
                               "bag_dir": bag_dir}.items()),
         launch_testing.actions.ReadyToTest(),
-    ]), {"params_file": params_file, "bag_dir": bag_dir, "folder": folder}
+    ]), {"params_file": params_file, "bag_dir": bag_dir, "folder": folder,
+         "overrides_before": overrides_before}
+
+
+def _overrides_files():
+    """The recorder QoS-override files of lockstep recordings now in the temporary folder."""
+    folder = tempfile.gettempdir()
+    return {name for name in os.listdir(folder)
+            if name.startswith("vas-recorder-qos-") and name.endswith(".yaml")}
 
 
 def _recorder_pid(bag_dir):
@@ -129,6 +138,10 @@ class TestBag(unittest.TestCase):
 
     def test_every_process_exits_cleanly(self, proc_info):
         launch_testing.asserts.assertExitCodes(proc_info)
+
+    def test_the_recorder_qos_file_is_removed_at_shutdown(self, overrides_before):
+        # the launch writes one for the recorder (keep all, lockstep) and removes it at the end
+        self.assertEqual(_overrides_files() - overrides_before, set())
 
     def test_bag_holds_every_period_once(self, bag_dir):
         counts = bag_counts(bag_dir)
