@@ -30,6 +30,8 @@ a skip of the whole test folder: "collected 0 items / 1 skipped" and exit status
 module.
 """
 
+import contextlib
+import logging
 import os
 import time
 from pathlib import Path
@@ -134,6 +136,25 @@ def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
         rows, cols = np.nonzero(inside)
         centroids.append([xs[cols].mean(), ys[rows].mean()])
     return np.rint(picture).astype(np.uint8), np.array(centroids)
+
+
+@contextlib.contextmanager
+def logged_warnings(name="visual_adaptive_servo.control.controller"):
+    """The warning records logger ``name`` emits inside the block (a list, filled as it runs).
+
+    A handler on the module's logger, not caplog: with ROS sourced, launch_testing's
+    pytest plugin makes every new logger a LaunchLogger that does not propagate to the
+    root, so caplog sees nothing under ``colcon test``.
+    """
+    records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = records.append
+    logger = logging.getLogger(name)
+    logger.addHandler(handler)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
 
 
 def bag_messages(path, topic):

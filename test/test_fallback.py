@@ -20,11 +20,10 @@ late the fallback holds it until the first frame; with a fixed 5 N m s/rad the
 wrist's torque flips sign every 1 ms sample and the run diverges at 0.046 s.
 """
 
-import logging
-
 import numpy as np
 import pytest
 
+from conftest import logged_warnings
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control import controller
 from visual_adaptive_servo.control.controller import fallback_bound, FALLBACK_STEP
@@ -150,18 +149,9 @@ def _scenario(tmp_path, torque_limit=NO_LIMIT):
 def test_a_light_wrist_held_by_the_fallback_until_a_late_first_frame_stays_bounded(
         tmp_path, monkeypatch):
     scenario = _scenario(tmp_path)
-    # a handler on the module's logger, not caplog: with ROS sourced, launch_testing's pytest
-    # plugin makes every new logger a LaunchLogger that does not propagate to the root
-    records = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = records.append
-    logger = logging.getLogger("visual_adaptive_servo.control.controller")
-    logger.addHandler(handler)
-    try:
+    with logged_warnings() as records:
         summary = run_scenario(scenario, str(tmp_path / "bounded"), 0.3, progress=False,
                                record=False, plots=False)
-    finally:
-        logger.removeHandler(handler)
     assert not summary["diverged"], summary.get("divergence_reason")
     assert summary["max_abs_torque"] < 30.0               # the roll joint's URDF effort
     assert any("the fallback uses roll" in r.getMessage() for r in records)

@@ -14,12 +14,11 @@
 
 """Safe start, projection, saturation, the J* guard and bad input in the sampled controller."""
 
-import logging
 
 import numpy as np
 import pytest
 
-from conftest import PAPER_CONFIG
+from conftest import logged_warnings, PAPER_CONFIG
 from visual_adaptive_servo.config.controller import ControllerConfig
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import (
@@ -379,18 +378,9 @@ def test_joint_damping_is_the_estimated_inertia_at_the_start_and_damps_the_fallb
 
 
 def test_joint_damping_is_off_when_the_inertia_estimate_is_zero():
-    # a handler on the module's logger, not caplog: with ROS sourced, launch_testing's pytest
-    # plugin makes every new logger a LaunchLogger that does not propagate to the root
-    records = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = records.append
-    logger = logging.getLogger("visual_adaptive_servo.control.controller")
-    logger.addHandler(handler)
-    try:
+    with logged_warnings() as records:
         ctl = controller(**{"joint_damping.inertia_rate": 20.0})   # the paper's a_d: no inertia
         ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
-    finally:
-        logger.removeHandler(handler)
     assert ctl.gains.D is None
     assert any("not positive definite" in r.getMessage() for r in records)
 
