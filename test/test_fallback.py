@@ -174,8 +174,8 @@ def test_without_a_torque_limit_the_urdf_effort_limits_saturate_the_command(
     np.testing.assert_array_equal(given.controller.torque_limit, [500.0] * 3)
     tracker = controller.AdaptiveVisualTracker(scenario.controller)
     lines = tracker.start(scenario.sim.initial_positions).lines()
-    assert ("torque limit: yaw 80, pitch 60, roll 30 N m (the URDF's <limit effort>, as "
-            "torque_limit is not given)") in lines
+    assert ("torque limit: yaw 80 N m, pitch 60 N m, roll 30 N m (the URDF's <limit effort>, "
+            "as torque_limit is not given)") in lines
     # the oracle of the test above: the fixed fallback damping's sign-flipping wrist torque
     # diverges without a limit; with the URDF's limits every command stays within them
     monkeypatch.setattr(controller, "fallback_bound",

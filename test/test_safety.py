@@ -93,6 +93,36 @@ def test_a_start_on_the_trajectory_is_not_blended():
     assert BlendedStart.from_measurement(traj, off, 0.7, 0.0, tolerance=0.01) is traj
 
 
+@pytest.mark.parametrize("speed, lengthened", [(10.0, True), (200.0, False), (0.0, False)])
+def test_a_far_start_is_blended_no_faster_than_the_speed_limit(speed, lengthened):
+    # a trajectory at rest: the blend's velocity is the offset's part alone, and its peak
+    # is measured by finite differences of x_d (not from the blend's own derivative)
+    traj = SinusoidTrajectory(np.array([45.0, 65.0]), np.zeros(2), np.zeros(2), 0.0)
+    off = traj(0.0)[0] + np.array([48.0, -64.0])          # 80 px off
+    blend = BlendedStart.from_measurement(traj, off, 0.5, 2.0, tolerance=0.01, speed=speed)
+    # 2 s at least; past that, as long as a peak of `speed` needs: 1.875 x 80 / speed
+    assert blend.duration == pytest.approx(1.875 * 80.0 / speed if lengthened else 2.0)
+    ts = np.linspace(0.5, 0.5 + blend.duration + 0.5, 20001)
+    xs = np.array([blend(t)[0] for t in ts])
+    peak = np.max(np.linalg.norm(np.diff(xs, axis=0), axis=1) / np.diff(ts))
+    assert peak == pytest.approx(speed if lengthened else 1.875 * 80.0 / 2.0, rel=1e-3)
+    np.testing.assert_allclose(blend(0.5 + blend.duration)[0], traj(0.0)[0])
+
+
+def test_the_blend_speed_follows_the_trajectory_s_rms_image_speed():
+    # the paper's circle, 20 px at pi/3 rad/s: RMS |x_d_dot| = 20 pi/3 px/s
+    ctl = controller(start_blend_speed=1.5)
+    assert ctl.blend_speed == pytest.approx(1.5 * 20.0 * np.pi / 3.0, rel=1e-3)
+    assert controller(start_blend_speed=0.0).blend_speed == 0.0
+    # a start 100 px off the paper's x_d(0) is blended in over 1.875 x 100 / (20 pi / 3) s
+    ctl = controller()
+    x = ctl.trajectory(0.0)[0] + np.array([60.0, 80.0])
+    ctl.step(0.0, Q0, np.zeros(3), x)
+    assert isinstance(ctl.desired, BlendedStart)
+    assert ctl.desired.duration == pytest.approx(1.875 * 100.0 / (20.0 * np.pi / 3.0),
+                                                 rel=1e-3)
+
+
 def test_first_sample_has_zero_tracking_error_with_a_blend():
     ctl = controller(start_blend_time=2.0)
     q = Q0 + np.array([0.05, -0.03, 0.02])

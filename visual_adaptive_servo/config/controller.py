@@ -180,6 +180,11 @@ CONTROLLER_PARAMS = (
     ParamSpec("start_blend_time", 2.0, "float",
               "Blend the offset between the first measured feature and x_d(0) out over this "
               "time [s] (zero when the start is on the trajectory); 0 = no blend.", 0.0, 60.0),
+    ParamSpec("start_blend_speed", 1.0, "float",
+              "The blend lasts long enough that its peak image speed is at most this x the "
+              "RMS image speed of x_d (the typical motion the derived gains assume, "
+              "docs/gain_design.md); start_blend_time and safety.recovery_blend_time are its "
+              "least durations; 0 = those alone.", 0.0, None),
     ParamSpec("start_tolerance", 0.01, "float",
               "A start (or camera recovery) within this of x_d counts as on the trajectory and "
               "is not blended [px].", 0.0, None),

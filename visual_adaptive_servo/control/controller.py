@@ -38,7 +38,7 @@ import numpy as np
 
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
-                          sampled_data_margin)
+                          sampled_data_margin, typical_image_speed)
 from .motion_scale import MotionScale
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
@@ -575,6 +575,10 @@ class StartReport:
     departures: tuple = ()      # the options on that depart from the paper, as "name value"
     torque_limit: tuple = ()    # |tau| limit per joint in effect [N m] (inf: none)
     torque_limit_source: str = "given"  # "given", "urdf" (<limit effort>) or "none"
+    prismatic: tuple = ()       # per joint: True where it slides (its limit is in N)
+    blend_speed: float = 0.0    # fastest image motion of a blend [px/s] (0: no limit)
+    blend_ratio: float = 0.0    # start_blend_speed
+    blend_least: float = 0.0    # start_blend_time [s]
 
     def lines(self):
         """The report as text lines."""
@@ -609,9 +613,15 @@ class StartReport:
                 source = {"urdf": "the URDF's <limit effort>, as torque_limit is not given",
                           "given": "torque_limit"}.get(self.torque_limit_source,
                                                        self.torque_limit_source)
+                units = self.prismatic or (False,) * len(self.joint_names)
                 out.append("torque limit: " + ", ".join(
-                    f"{name} {lim:g}" for name, lim in zip(self.joint_names, limits.tolist()))
-                    + f" N m ({source})")
+                    f"{name} {lim:g} {'N' if slides else 'N m'}" for name, lim, slides
+                    in zip(self.joint_names, limits.tolist(), units)) + f" ({source})")
+        if self.blend_speed > 0.0:
+            out.append(f"start blend: x_d moves at most {self.blend_speed:.3g} px/s while it is "
+                       f"blended in (start_blend_speed {self.blend_ratio:g} x its RMS image "
+                       f"speed): a start d px off takes max({self.blend_least:g} s, "
+                       f"1.875 d / {self.blend_speed:.3g} px/s)")
         out.append("departures from the paper (docs/robust_adaptation.md): "
                    + (", ".join(self.departures) if self.departures else "none"))
         return out
@@ -669,7 +679,10 @@ class AdaptiveVisualTracker:
 
     Start: x_o(0) = x(0); the offset x(0) - x_d(0) is blended out over
     ``start_blend_time`` (:class:`~.trajectory.BlendedStart`), so the start is
-    smooth from anywhere and unchanged when it is on the trajectory.
+    smooth from anywhere and unchanged when it is on the trajectory; longer when
+    the offset is large, so that the blend never asks for image motion faster
+    than ``start_blend_speed`` x the RMS image speed of x_d, the motion the
+    derived gains assume (:mod:`.gain_design`).
 
     Bad input (missing, NaN/inf, wrong size, outside the image, time going
     backwards) rejects the sample: nothing is committed; the last valid command
@@ -702,6 +715,11 @@ class AdaptiveVisualTracker:
         self._inputs_valid = None   # sample_kernels.inputs_valid with the compiled backend
         self.predictor = FramePredictor(config["max_frame_age"], config["frame_gain"],
                                         config["drift_gain"])
+        # the fastest image motion a blend may ask for [px/s]: start_blend_speed x the RMS
+        # speed of x_d that the derived adaptation gains are normalised for (0: no limit)
+        ratio = config["start_blend_speed"]
+        self.blend_speed = (ratio * float(np.linalg.norm(typical_image_speed(
+            self.trajectory, 2 * self.model.m, config["gamma"]))) if ratio > 0.0 else 0.0)
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
                                   config["motion_scale.lower"], config["motion_scale.upper"],
                                   config["motion_scale.min_motion"], config["max_frame_age"],
@@ -989,7 +1007,8 @@ class AdaptiveVisualTracker:
             blend = (self.config.start_blend_time if self.t_last is None
                      else self.config["safety.recovery_blend_time"])
             desired = BlendedStart.from_measurement(self.trajectory, x, t, blend,
-                                                    self.config["start_tolerance"])
+                                                    self.config["start_tolerance"],
+                                                    self.blend_speed)
         else:
             desired = self.desired
             dt = min(t - self.t_last, self.config["max_dt"])
@@ -1028,6 +1047,12 @@ class AdaptiveVisualTracker:
         # commit
         if restarting and self.stale:
             log.info("camera back at t=%.3f: observer restarted, x_d blended in again", t)
+        if restarting and isinstance(desired, BlendedStart) and desired.duration > blend:
+            log.info("x_d blended in over %.2f s, not %g s: the feature is %.1f px off x_d, and "
+                     "a blend moves at most start_blend_speed x the RMS image speed of x_d "
+                     "(%.3g px/s)", desired.duration, blend,
+                     float(np.linalg.norm(desired.x_start - self.trajectory(t)[0])),
+                     self.blend_speed)
         self.desired = desired
         self.state, self.rates, self.t_last = state, out.rates, t
         self.e_int, self._xd_last = e_int, xd
@@ -1273,10 +1298,14 @@ class AdaptiveVisualTracker:
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")
+        chain = getattr(model, "chain", None)
+        prismatic = tuple(j.prismatic for j in chain.joints) if chain is not None else ()
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,
-                             tuple(departures), limit, limit_source)
+                             tuple(departures), limit, limit_source, prismatic,
+                             self.blend_speed, config["start_blend_speed"],
+                             config.start_blend_time)
         # one record: a node forwards the core's logging throttled per call site
         log.info("start-up report:\n  %s", "\n  ".join(report.lines()))
         return report

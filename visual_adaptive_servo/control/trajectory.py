@@ -61,6 +61,20 @@ class SinusoidTrajectory:
         return x, xd, xdd
 
 
+#: the largest value of sigma_dot(tau) of :func:`quintic_blend`: 30 (1/2)^2 (1/2)^2
+QUINTIC_PEAK_RATE = 1.875
+
+
+def blend_duration(least, distance, speed):
+    """How long a quintic blend over ``distance`` [px] takes to peak at ``speed`` [px/s].
+
+    At least ``least`` [s]; ``speed`` <= 0 (no limit) gives ``least``.
+    """
+    if speed <= 0.0:
+        return least
+    return max(least, QUINTIC_PEAK_RATE * distance / speed)
+
+
 def quintic_blend(tau):
     """sigma(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 on [0, 1] and its two derivatives.
 
@@ -183,18 +197,23 @@ class BlendedStart:
         object.__setattr__(self, "x_start", np.asarray(self.x_start, dtype=float))
 
     @classmethod
-    def from_measurement(cls, trajectory, x, t, duration, tolerance):
+    def from_measurement(cls, trajectory, x, t, duration, tolerance, speed=0.0):
         """The blend from the measured ``x`` at ``t``, or ``trajectory`` itself when x is on it.
 
         "On it" means every coordinate within ``tolerance`` [px] of x_d(t): such an
         offset is far below any camera's resolution, and not blending it keeps a run
         that starts on the trajectory exactly that run (the paper's start,
         q(0) = (1.0807, 0.5756, -0.5), is 0.0036 px off x_d(0)).
+
+        ``speed`` > 0 [px/s] lengthens the blend past ``duration`` where needed, so that
+        the offset's part of the blend's velocity, sigma_dot |x - x_d(t)| with the offset
+        at ``t``, peaks at no more than ``speed`` (:func:`blend_duration`).
         """
         offset = np.asarray(x, dtype=float) - trajectory(t)[0]
         if duration <= 0.0 or max(np.abs(offset).tolist()) <= tolerance:
             return trajectory
-        return cls(trajectory, np.array(x, dtype=float), t, duration)
+        return cls(trajectory, np.array(x, dtype=float), t,
+                   blend_duration(duration, float(np.linalg.norm(offset)), speed))
 
     def __call__(self, t):
         x, xd, xdd = self.trajectory(t)
