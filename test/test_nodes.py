@@ -30,6 +30,7 @@ test node commands it with torques that number the commands, and the joint
 states it publishes carry the torque applied over each period.
 """
 
+import logging
 import math
 import os
 
@@ -473,3 +474,52 @@ def test_realtime_sim_counts_the_periods_without_a_new_command_it_really_had(con
     finally:
         driver.node.destroy_node()
         sim.destroy_node()
+
+
+class _Sink:
+    """Records what the handler forwards, per level (the node's logger in the test below)."""
+
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(("info", text))
+
+    def warning(self, text):
+        self.lines.append(("warning", text))
+
+    def error(self, text):
+        self.lines.append(("error", text))
+
+
+def test_the_core_s_log_lines_are_throttled_per_call_site_not_all_together(context, capfd):
+    from visual_adaptive_servo.ros.controller_node import RosLogHandler
+    core = logging.getLogger("visual_adaptive_servo.test_log_handler")
+    core.setLevel(logging.INFO)
+    now = [0.0]
+    sink = _Sink()
+    handler = RosLogHandler(sink, clock=lambda: now[0])
+    core.addHandler(handler)
+    try:
+        for _ in range(3):                      # one call site, three times within 1 s
+            core.info("report")
+        core.info("blend")                      # another site 0 s later: not silenced
+        core.warning("careful")
+        now[0] = 1.0                            # a second later the first site speaks again
+        core.info("report")
+    finally:
+        core.removeHandler(handler)
+    assert sink.lines == [("info", "report"), ("info", "blend"), ("warning", "careful"),
+                          ("info", "report")]
+    # through a real node's logger: two sites within a second both reach the console
+    node = rclpy.create_node("log_handler_test", context=context)
+    handler = RosLogHandler(node.get_logger())
+    core.addHandler(handler)
+    try:
+        core.info("first line of the core")
+        core.info("second line of the core")
+    finally:
+        core.removeHandler(handler)
+        node.destroy_node()
+    err = capfd.readouterr().err
+    assert "first line of the core" in err and "second line of the core" in err

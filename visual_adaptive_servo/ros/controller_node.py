@@ -151,20 +151,37 @@ ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 
 
 class RosLogHandler(logging.Handler):
-    """Forward the core's Python logging to the node's logger (at most one line a second)."""
+    """Forward the core's Python logging to the node's logger, a call site at most once a second.
 
-    def __init__(self, logger):
+    rclpy keys ``throttle_duration_sec`` on the line that calls the node's logger, which
+    here would be this handler for every record of a level: one message of the core would
+    silence every other of its level for a second (the start-up report hid the start
+    blend's line that follows it).  So the throttle is kept here, per call site of the core
+    (the record's file and line), on the steady clock.
+    """
+
+    #: s between two records of one call site
+    THROTTLE = 1.0
+
+    def __init__(self, logger, clock=time.monotonic):
         super().__init__()
         self.logger = logger
+        self.clock = clock
+        self.last = {}          # (file, line) -> clock of the record last forwarded
 
     def emit(self, record):
+        site, now = (record.pathname, record.lineno), self.clock()
+        last = self.last.get(site)
+        if last is not None and now - last < self.THROTTLE:
+            return
+        self.last[site] = now
         text = self.format(record)
         if record.levelno >= logging.ERROR:
-            self.logger.error(text, throttle_duration_sec=1.0)
+            self.logger.error(text)
         elif record.levelno >= logging.WARNING:
-            self.logger.warning(text, throttle_duration_sec=1.0)
+            self.logger.warning(text)
         else:
-            self.logger.info(text, throttle_duration_sec=1.0)
+            self.logger.info(text)
 
 
 #: s of wall time the node waits at its exit for a lockstep recording's recorder to have
