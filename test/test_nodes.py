@@ -523,3 +523,25 @@ def test_the_core_s_log_lines_are_throttled_per_call_site_not_all_together(conte
         node.destroy_node()
     err = capfd.readouterr().err
     assert "first line of the core" in err and "second line of the core" in err
+
+
+def test_the_controller_node_logs_the_core_s_info_lines_and_restores_the_level(context, capfd):
+    core = logging.getLogger("visual_adaptive_servo")
+    before = core.level
+    # under colcon test launch_testing's plugin makes new loggers not propagate (conftest's
+    # logged_warnings); a node's own process propagates, as Python does by default
+    module = logging.getLogger("visual_adaptive_servo.control.controller")
+    propagates, module.propagate = module.propagate, True
+    ctl = ControllerNode(context=context)
+    try:
+        # Python's default level (WARNING) would drop the core's INFO lines, among them
+        # the start-up report and a long start blend's duration
+        assert core.getEffectiveLevel() == logging.INFO
+        q0 = load_scenario(CONFIG).sim.initial_positions
+        ctl.tracker.start(q0)
+    finally:
+        ctl.destroy_node()
+        module.propagate = propagates
+    assert core.level == before
+    err = capfd.readouterr().err
+    assert err.count("start-up report:") == 1 and "departures from the paper" in err

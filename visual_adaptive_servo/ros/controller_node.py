@@ -284,9 +284,14 @@ class ControllerNode(Node):
         self.health_key = None         # what the health level of the previous sample depends on
         self.last_level = None         # its level
         self.samples = 0
-        self.reported = None           # the tracker's start-up report, once logged
+        # the core's log lines reach the node's log at the node's own level (Python's default
+        # WARNING would drop its INFO lines: the start-up report, a long start blend, a camera
+        # coming back); the previous level comes back with destroy_node
+        core = logging.getLogger("visual_adaptive_servo")
+        self.core_level = core.level
+        core.setLevel(int(self.get_logger().get_effective_level()) or logging.INFO)
         self.log_handler = RosLogHandler(self.get_logger())
-        logging.getLogger("visual_adaptive_servo").addHandler(self.log_handler)
+        core.addHandler(self.log_handler)
         self.get_logger().info(f"model {params['model']} (kinematic tensors: "
                                f"{getattr(config.model, 'backend', 'numpy')} backend), joints "
                                f"{self.joint_names}, timing_mode {config.timing_mode}")
@@ -343,10 +348,6 @@ class ControllerNode(Node):
         result = self.tracker.step(t, q, qd, x, x_stamp)
         self.samples += 1
         self._publish(result, stamp_ns)
-        if self.tracker.report is not None and self.tracker.report is not self.reported:
-            # the gains derived at the first joint sample, the checks at the start pose
-            self.reported = self.tracker.report
-            self.get_logger().info("start-up report:\n  " + "\n  ".join(self.reported.lines()))
 
     def _on_activity(self, msg):
         states = {c.name: c.state.label for c in msg.controllers}
@@ -446,7 +447,9 @@ class ControllerNode(Node):
                                           f"subscribers within {FLUSH_TIMEOUT:g} s")
 
     def destroy_node(self):
-        logging.getLogger("visual_adaptive_servo").removeHandler(self.log_handler)
+        core = logging.getLogger("visual_adaptive_servo")
+        core.removeHandler(self.log_handler)
+        core.setLevel(self.core_level)
         return super().destroy_node()
 
 
