@@ -15,6 +15,8 @@
 """Safe start, projection, saturation, the J* guard and bad input in the sampled controller."""
 
 
+import os
+
 import numpy as np
 import pytest
 
@@ -420,3 +422,48 @@ def test_estimated_mass_matrix_from_the_regressor_is_the_models(scenario):
     for q in (Q0, Q0 + 0.3):
         np.testing.assert_allclose(model.estimated_mass_matrix(q, model.a_d),
                                    model.mass_matrix(q), rtol=1e-12, atol=1e-12)
+
+
+# -- joint position limits ----------------------------------------------------------------------
+BOOM = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "docs",
+                    "examples", "boom", "boom.yaml")
+
+
+def test_a_joint_past_its_urdf_limit_is_reported_once_per_excursion(tmp_path):
+    scenario = load_scenario(BOOM)
+    # the URDF's limits, read from the file: extend (prismatic) -0.3..0.3 m
+    np.testing.assert_array_equal(scenario.controller.model.position_limits,
+                                  [(-3.0, 3.0), (-2.0, 2.0), (-0.3, 0.3), (-3.0, 3.0)])
+    tracker = AdaptiveVisualTracker(scenario.controller)
+    q = np.array(scenario.sim.initial_positions, dtype=float)
+    x = scenario.controller.model.project(q)[0]
+    path = [0.05, 0.2, 0.31, 0.35, 0.32, 0.2, 0.32, 0.1]      # extend [m], every 10 ms
+    with logged_warnings() as records:
+        for k, extend in enumerate(path):
+            q[2] = extend
+            tracker.step(0.01 * k, q.copy(), np.zeros(4), x)
+    past = [r.getMessage() for r in records if "URDF" in r.getMessage()]
+    # out at 0.31 (reported), still out at 0.35 and 0.32 (not again), back in, out again
+    assert len(past) == 2 and tracker.limit_excursions == 2
+    assert past[0].startswith("joint extend at 0.31 m is past its URDF upper limit 0.3 m "
+                              "(t=0.020)")
+    assert tracker.outside_limits == set()          # back inside at the end
+    # a limit the URDF does not set (lower >= upper, or a continuous joint) is none
+    text = open(scenario.controller.model.chain.urdf).read().replace(
+        'lower="-0.3" upper="0.3"', 'lower="0" upper="0"')
+    (tmp_path / "boom.urdf").write_text(text)
+    from visual_adaptive_servo.models.urdf_chain import load_chain
+    chain = load_chain(str(tmp_path / "boom.urdf"), "world", "tool", "controller_node")
+    assert chain.position_limits[2] == (-np.inf, np.inf)
+
+
+def test_the_run_summary_counts_the_limit_excursions(tmp_path):
+    from visual_adaptive_servo.runner import run_scenario
+    # the boom started 5 cm past its extension's upper limit, which the URDF narrows to 0
+    text = open(os.path.join(os.path.dirname(BOOM), "boom.urdf")).read().replace(
+        'lower="-0.3" upper="0.3"', 'lower="-0.3" upper="0.0"')
+    (tmp_path / "boom.urdf").write_text(text)
+    (tmp_path / "boom.yaml").write_text(open(BOOM).read())
+    summary = run_scenario(load_scenario(str(tmp_path / "boom.yaml")), str(tmp_path / "run"),
+                           duration=0.2, progress=False, record=False, plots=False)
+    assert summary["joint_limit_excursions"] == 1

@@ -233,6 +233,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         if origin is not None:
             reason += f"; grew first: {origin[0]} at t={origin[1]:.3f} s"
     counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
+    # times a joint went past its URDF position limit (the controller warned each time)
+    counters["joint_limit_excursions"] = getattr(ctl, "limit_excursions", 0)
     counters.update(detections.figures())
     summary = summarize(data, series.status, wall, diverged, reason, counters, period)
     summary.update(interrupted=interrupted, error=error, steps=series.count,

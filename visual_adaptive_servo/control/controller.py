@@ -45,6 +45,8 @@ from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
 INF = float("inf")
+#: how often the joint positions are checked against the URDF's limits [s of sample time]
+LIMIT_CHECK_PERIOD = 0.01
 _NO_PIXELS = np.empty(0)    # x of a sample without a frame, for sample_kernels.inputs_valid
 
 
@@ -720,6 +722,10 @@ class AdaptiveVisualTracker:
         ratio = config["start_blend_speed"]
         self.blend_speed = (ratio * float(np.linalg.norm(typical_image_speed(
             self.trajectory, 2 * self.model.m, config["gamma"]))) if ratio > 0.0 else 0.0)
+        # the URDF's joint position limits, (n, 2), None when it gives none: the law does not
+        # keep the arm inside them, so a joint past one is reported (_check_position_limits)
+        limits = np.asarray(getattr(self.model, "position_limits", ()), dtype=float)
+        self.position_limits = (limits if limits.size and np.isfinite(limits).any() else None)
         self.scale = (MotionScale(config["motion_scale.window"], config["motion_scale.rate"],
                                   config["motion_scale.lower"], config["motion_scale.upper"],
                                   config["motion_scale.min_motion"], config["max_frame_age"],
@@ -773,6 +779,9 @@ class AdaptiveVisualTracker:
             self.scale.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
+        self.outside_limits = set()    # joints past a URDF position limit at the last check
+        self.limit_excursions = 0      # times a joint went past one
+        self._limit_next = -INF        # sample time of the next check
 
     def update_gains(self, **changes):
         """Replace gains (K, Gamma_*) or safety settings atomically; validated first."""
@@ -852,6 +861,9 @@ class AdaptiveVisualTracker:
                     self._design(q)
                 except (ConfigError, np.linalg.LinAlgError) as exc:
                     return self._reject(t, q, qd, [f"start: {exc}"])
+        if self.position_limits is not None and t + 1e-9 >= self._limit_next:
+            self._limit_next = t + LIMIT_CHECK_PERIOD
+            self._check_position_limits(t, q)
         problems, frame, stamp = [], None, t
         if x is None and not self.compensate:
             problems.append("feature x: missing")
@@ -898,6 +910,31 @@ class AdaptiveVisualTracker:
             return self._inputs_valid(q, qd, x, with_frame)
         except TypeError:           # not C-contiguous writable float64 vectors
             return False
+
+    def _check_position_limits(self, t, q):
+        """Warn once per excursion when a joint is past its URDF position limit.
+
+        Nothing in eqs (18)-(22) keeps the arm inside its joint limits: a trajectory the
+        arm can only follow past one drives the joint there, where a real arm stops at
+        its end stop and the law winds up against it.  Checked every
+        ``LIMIT_CHECK_PERIOD`` of sample time (not at every sample: a 1 kHz loop's cost).
+        """
+        lower, upper = self.position_limits[:, 0], self.position_limits[:, 1]
+        names = getattr(self.model, "joint_names", None) or [
+            f"joint{i + 1}" for i in range(self.model.n)]
+        slides = getattr(self.model, "prismatic", None) or (False,) * self.model.n
+        for i, value in enumerate(np.asarray(q, dtype=float).tolist()):
+            side = ("lower" if value < lower[i] else "upper" if value > upper[i] else None)
+            if side is None:
+                self.outside_limits.discard(i)
+            elif i not in self.outside_limits:
+                self.outside_limits.add(i)
+                self.limit_excursions += 1
+                unit = "m" if slides[i] else "rad"
+                log.warning("joint %s at %.4g %s is past its URDF %s limit %.4g %s (t=%.3f): "
+                            "the controller does not keep the arm inside its joint limits; "
+                            "keep the trajectory within the arm's reach", names[i], value, unit,
+                            side, lower[i] if side == "lower" else upper[i], unit, t)
 
     def _check_stale(self, t):
         """Mark the camera stale when no frame was applied for ``safety.camera_timeout``."""

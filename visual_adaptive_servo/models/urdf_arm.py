@@ -140,6 +140,16 @@ class UrdfArmCamera(RobotCameraModel):
         return self.chain.effort_limits
 
     @property
+    def position_limits(self):
+        """The URDF's ``(lower, upper)`` per joint [rad or m]; infinite where it gives none."""
+        return self.chain.position_limits
+
+    @property
+    def prismatic(self):
+        """Per joint: True where it slides."""
+        return tuple(j.prismatic for j in self.chain.joints)
+
+    @property
     def backend(self):
         """``"compiled"`` or ``"numpy"``: what :meth:`kinematic_tensors` runs."""
         return self.kinematics.backend

@@ -68,6 +68,8 @@ class ChainJoint:
     axis: np.ndarray                # (3,) unit, in the joint's own frame
     folded: tuple = ()              # names of the fixed joints folded into this origin
     effort: float = float("inf")    # <limit effort> [N m or N]; inf: none given (or 0)
+    lower: float = float("-inf")    # <limit lower> [rad or m]; -inf: none (continuous, unset)
+    upper: float = float("inf")     # <limit upper> [rad or m]; inf: none
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,11 @@ class KinematicChain:
     def effort_limits(self):
         """Each joint's ``<limit effort>`` [N m, N for a prismatic joint]; inf where none."""
         return tuple(j.effort for j in self.joints)
+
+    @property
+    def position_limits(self):
+        """Each joint's ``(lower, upper)`` [rad, m for a prismatic joint]; infinite where none."""
+        return tuple((j.lower, j.upper) for j in self.joints)
 
     def frames(self, q):
         """Rotations (n+1, 3, 3) and origins (n+1, 3) of frames 0..n in the base frame."""
@@ -210,7 +217,8 @@ def load_chain(urdf_path, base_link, tip_link, section="urdf"):
         if norm == 0.0:
             raise ValueError(f"{section}.urdf: joint {joint.get('name')!r} has a zero axis")
         joints.append(ChainJoint(joint.get("name"), kind == "prismatic", rotation, translation,
-                                 axis / norm, tuple(folded), _effort(joint, section)))
+                                 axis / norm, tuple(folded), _effort(joint, section),
+                                 *_position_limits(joint, kind, section)))
         rotation, translation, folded = np.eye(3), np.zeros(3), []
     if not joints:
         raise ValueError(f"{section}.tip_link: no revolute or prismatic joint between "
@@ -236,6 +244,30 @@ def _effort(joint, section):
         raise ValueError(f"{section}.urdf: joint {joint.get('name')!r} has <limit effort="
                          f"{text!r}>: must be a number >= 0")
     return effort if effort > 0.0 else float("inf")
+
+
+def _position_limits(joint, kind, section):
+    """The joint's ``(<limit lower>, <limit upper>)``; infinite where the URDF sets none.
+
+    A continuous joint has none; a revolute or prismatic one without the attributes, or
+    with lower >= upper (URDFs write 0 and 0 for "unset"), has none either.  A value that
+    is not a number is refused naming the joint.
+    """
+    limit = joint.find("limit")
+    if kind == "continuous" or limit is None:
+        return float("-inf"), float("inf")
+    bounds = []
+    for name, default in (("lower", float("-inf")), ("upper", float("inf"))):
+        text = limit.get(name)
+        try:
+            bounds.append(default if text is None else float(text))
+        except ValueError:
+            raise ValueError(f"{section}.urdf: joint {joint.get('name')!r} has <limit {name}="
+                             f"{text!r}>: must be a number") from None
+    lower, upper = bounds
+    if not lower < upper:
+        return float("-inf"), float("inf")
+    return lower, upper
 
 
 def _origin(joint):
