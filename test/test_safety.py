@@ -457,7 +457,7 @@ def test_a_joint_past_its_urdf_limit_is_reported_once_per_excursion(tmp_path):
     assert chain.position_limits[2] == (-np.inf, np.inf)
 
 
-def test_the_run_summary_counts_the_limit_excursions(tmp_path):
+def test_the_run_summary_counts_the_limit_excursions(tmp_path, capsys):
     from visual_adaptive_servo.runner import run_scenario
     # the boom started 5 cm past its extension's upper limit, which the URDF narrows to 0
     text = open(os.path.join(os.path.dirname(BOOM), "boom.urdf")).read().replace(
@@ -467,3 +467,10 @@ def test_the_run_summary_counts_the_limit_excursions(tmp_path):
     summary = run_scenario(load_scenario(str(tmp_path / "boom.yaml")), str(tmp_path / "run"),
                            duration=0.2, progress=False, record=False, plots=False)
     assert summary["joint_limit_excursions"] == 1
+    # vas run says so at the end (its log shows errors only unless -v)
+    from visual_adaptive_servo import cli
+    code = cli.main(["run", "--config", str(tmp_path / "boom.yaml"), "--out",
+                     str(tmp_path / "cli"), "--duration", "0.1", "--no-bag", "--no-progress"])
+    assert code == 0
+    assert ("JOINT LIMITS: a joint went past its URDF position limit 1 time(s)"
+            in capsys.readouterr().err)

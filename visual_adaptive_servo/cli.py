@@ -76,6 +76,10 @@ def cmd_run(args):
     print(f"outputs in {args.out}: {', '.join(summary['outputs'])}")
     if summary["diverged"]:
         print(f"DIVERGED: {summary['divergence_reason']}", file=sys.stderr)
+    if summary.get("joint_limit_excursions"):
+        print(f"JOINT LIMITS: a joint went past its URDF position limit "
+              f"{summary['joint_limit_excursions']} time(s); `vas -v run ...` names them",
+              file=sys.stderr)
     if summary.get("error"):
         print(f"FAILED: {summary['error']}", file=sys.stderr)
     if summary.get("interrupted"):
