@@ -19,7 +19,7 @@ from math import exp, log
 import numpy as np
 import pytest
 
-from visual_adaptive_servo.control.motion_scale import MotionScale
+from visual_adaptive_servo.control.motion_scale import MotionRatio, MotionScale
 
 T = 0.001          # joint sample time
 FRAME = 1.0 / 30   # camera period
@@ -304,3 +304,87 @@ def test_a_rejected_sample_reports_the_scale_it_keeps(tmp_path):
     q = np.asarray(scenario.sim.initial_positions, dtype=float)
     result = tracker.step(0.0, q, np.zeros(q.size), np.full(2, np.nan))   # NaN pixels
     assert result.status != "ok" and result.motion_scale == 0.7
+
+
+# -- the ratio of a_z_perp to a_z (motion_scale.ratio_rate) -----------------------------------
+def feed_ratio(ratio, k1, k2, duration, noise=0.0, b_like_a=False, seed=0, latency=0.033):
+    """Joint samples of a model whose A, B parts are k1, k2 times too slow; frames of the truth.
+
+    The model's a_z_perp follows the ratio's steps, as the controller's does: its A is
+    ``ratio.total`` times what it was.  Returns the steps.
+    """
+    rng = np.random.default_rng(seed)
+    t_next_frame, pending, steps, truth = 0.0, [], [], []
+    for k in range(int(round(duration / T))):
+        t = k * T
+        a = 20.0 * np.array([np.cos(2 * t), np.sin(3 * t), -np.sin(2 * t), np.cos(t)])
+        b = (a.copy() if b_like_a
+             else 15.0 * np.array([np.sin(t), np.cos(2 * t), np.cos(3 * t), -np.sin(t)]))
+        truth.append((t, k1 * a + k2 * b))           # the true image velocity
+        if t >= t_next_frame - 1e-12:
+            pending.append(t)
+            t_next_frame += FRAME
+        while pending and pending[0] <= t - latency + 1e-12:
+            stamp = pending.pop(0)
+            x = 300.0 + T * np.sum([v for tt, v in truth if tt < stamp], axis=0)
+            steps.append(ratio.frame(stamp, x + noise * rng.standard_normal(4)))
+        ratio.record(t, (ratio.total * a).tolist(), b.tolist())
+    return steps
+
+
+def test_the_ratio_scales_a_z_perp_to_what_the_frames_say():
+    # A 2.5x too slow relative to B (the truth is 2.5 A + 1.0 B): a_z_perp ends 2.5x larger
+    ratio = MotionRatio(window=1.0, rate=1.0, lower=0.2, upper=5.0, min_motion=1.0,
+                        horizon=0.5, condition=0.02)
+    steps = feed_ratio(ratio, 2.5, 1.0, duration=8.0, noise=0.5)
+    assert any(s != 1.0 for s in steps)
+    assert ratio.total == pytest.approx(2.5, rel=0.03)
+    assert ratio.ratio == pytest.approx(1.0, abs=0.03)      # nothing left to correct
+    # each step is ln rho times rate dt at most: no jump of the estimate
+    assert max(abs(log(s)) for s in steps) <= 1.0 * (FRAME + 1e-9) * log(5.0)
+    # a common scale of A and B is not the ratio's (the motion scale's job)
+    common = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    feed_ratio(common, 1.7, 1.7, duration=8.0)
+    assert common.total == pytest.approx(1.0, rel=1e-6)
+
+
+def test_the_ratio_waits_for_motion_that_tells_a_from_b():
+    ratio = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    assert set(feed_ratio(ratio, 2.5, 1.0, duration=3.0, b_like_a=True)) == {1.0}
+    still = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    assert set(feed_ratio(still, 0.0, 0.0, duration=1.0)) == {1.0}  # the frames never move
+    assert still.total == 1.0
+
+
+def test_the_ratio_corrects_a_guess_of_a_z_perp_off_relative_to_a_z(tmp_path):
+    # the paper arm with a_z_perp guessed x0.5 (a_z right), a 30 Hz camera 33 ms late, 0.5 px:
+    # the ratio doubles a_z_perp (the truth's factor) and the tracking is better than without
+    from visual_adaptive_servo.config.scenario import load_scenario
+    from visual_adaptive_servo.control.controller import AdaptiveVisualTracker
+    from visual_adaptive_servo.runner import run_scenario
+
+    base = "config/paper_3dof_urdf.yaml"
+    a_perp = (np.array(load_scenario(base).controller.a_z_perp_init) * 0.5).tolist()
+    results = {}
+    for rate in (1.0, 0.0):
+        overrides = ["sim_node.camera_rate=30", "sim_node.camera_latency=0.033",
+                     "sim_node.pixel_noise_std=0.5", "controller_node.camera_rate=30",
+                     "controller_node.camera_latency=0.033",
+                     f"controller_node.a_z_perp_init={a_perp}",
+                     "controller_node.motion_scale.enabled=true",
+                     f"controller_node.motion_scale.ratio_rate={rate}"]
+        trackers = []
+
+        def factory(config, trackers=trackers):
+            trackers.append(AdaptiveVisualTracker(config))
+            return trackers[-1]
+
+        summary = run_scenario(load_scenario(base, overrides), str(tmp_path / str(rate)),
+                               duration=10.0, progress=False, record=False, plots=False,
+                               controller_factory=factory)
+        assert not summary["diverged"]
+        results[rate] = summary["final_rms_true_error_px"], trackers[0].ratio
+    (on, ratio), (off, none) = results[1.0], results[0.0]
+    assert none is None
+    assert ratio.total == pytest.approx(2.0, rel=0.15)
+    assert on < 0.8 * off

@@ -39,7 +39,7 @@ import numpy as np
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
                           sampled_data_margin, typical_image_speed)
-from .motion_scale import MotionScale
+from .motion_scale import MotionRatio, MotionScale
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
 
@@ -732,6 +732,13 @@ class AdaptiveVisualTracker:
                                   config["motion_scale.initial"],
                                   config["motion_scale.start_factor"])
                       if config["motion_scale.enabled"] and self.compensate else None)
+        # how far a_z_perp is off relative to a_z, from the frames (motion_scale.ratio_rate)
+        self.ratio = (MotionRatio(config["motion_scale.window"], config["motion_scale.ratio_rate"],
+                                  config["motion_scale.lower"], config["motion_scale.upper"],
+                                  config["motion_scale.min_motion"], config["max_frame_age"],
+                                  config["motion_scale.ratio_condition"])
+                      if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
+                      else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
                                       config["projection.a_z_min"], config["projection.a_z_max"],
@@ -777,6 +784,8 @@ class AdaptiveVisualTracker:
         self.predictor.reset()
         if self.scale is not None:
             self.scale.reset()
+        if getattr(self, "ratio", None) is not None:
+            self.ratio.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
         self.outside_limits = set()    # joints past a URDF position limit at the last check
@@ -966,6 +975,10 @@ class AdaptiveVisualTracker:
         if frame is not None:
             if self.scale is not None:
                 self.scale.frame(stamp, frame)
+            if self.ratio is not None:
+                step = self.ratio.frame(stamp, frame)
+                if step != 1.0 and self.t_last is not None:
+                    self._scale_a_perp(step)
             x_hat = self.predictor.correct(stamp, frame, t)
         else:
             x_hat = self.predictor.predict(t)
@@ -985,6 +998,9 @@ class AdaptiveVisualTracker:
                 res, fast = self._fast_sample
                 if self.scale is not None:
                     self.scale.record(t, res[fast.speed])
+                if self.ratio is not None:
+                    m2 = 2 * self.model.m
+                    self._record_ratio(t, x_hat, res[fast.model_rate].reshape(3, m2))
                 self.predictor.stored(t, applied)
             else:
                 rate = (self._model_rate
@@ -1000,8 +1016,29 @@ class AdaptiveVisualTracker:
             self.model.kinematic_tensors(q, qd), qd, self.state), applied)
         return self._reject(t, q, qd, problems)
 
+    def _record_ratio(self, t, x_hat, rate):
+        """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
+        jq, z_dot, z = rate
+        self.ratio.record(t, (jq / z).tolist(), (-x_hat * z_dot / z).tolist())
+
+    def _scale_a_perp(self, step):
+        """a_z_perp *= step between samples (motion_scale.ratio_rate), in either backend."""
+        if self._fast_prev is not None:
+            # the compiled sample reads the last sample's state from its array: a copy, so
+            # the state the last step returned stays what it was
+            layout = self._fast_prev, self._fast_layout
+            self._fast_prev = layout[0].copy()
+            layout = layout[1]
+            flat = self._fast_prev[layout.state]
+            flat[layout.state_ends[0]:layout.state_ends[1]] *= step
+            self.state = _frozen(_LazyFlatState, {"_flat": (flat, layout.state_ends)})
+        else:
+            self.state = replace(self.state, a_z_perp=self.state.a_z_perp * step)
+
     def _commit_prediction(self, t, x_hat, rate, stamp):
         """Store the sample in the predictor (its rate scaled by s) and the scale's path."""
+        if self.ratio is not None and x_hat is not None:
+            self._record_ratio(t, x_hat, rate)
         if self.scale is not None:
             jq, z_dot, z = rate
             if x_hat is not None:
@@ -1331,7 +1368,8 @@ class AdaptiveVisualTracker:
             departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
-                              f"start_factor {self.scale.start_factor:g})")
+                              f"start_factor {self.scale.start_factor:g}, ratio_rate "
+                              f"{self.ratio.rate if self.ratio is not None else 0.0:g} /s)")
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")

@@ -205,3 +205,128 @@ def _numpy_sum(values):
     if len(values) >= 8:
         return float(np.sum(values))
     return sum(values)
+
+
+class MotionRatio:
+    """How far the estimated camera's two parts disagree, learnt from the frames' motion.
+
+    The model's image rate per coordinate is A + B: A = Z_hat^-1 J_hat_perp q_dot, the part
+    of eq (a1) carried by a_z_perp, and B = -Z_hat^-1 x Z_hat_dot, the part carried by
+    a_z.  An initial a_z_perp too large or too small *relative to* a_z (a scale common to
+    both is the projection matrix's own, unobservable and harmless) makes A wrong by a
+    factor while B stays right, an error no single scale of A + B (:class:`MotionScale`)
+    removes.  This fits, over the same exponentially weighted window of frames,
+
+        x_c - mean(x_c) = k1 (P_A(t_c) - mean) + k2 (P_B(t_c) - mean),
+
+    P_A, P_B the paths of A and B (per image coordinate, pooled), and at every frame
+    scales a_z_perp by rho^(rate dt), rho = k1 / k2 bounded to ``[lower, upper]`` and
+    dt the time since the last frame (at most 1/rate): a_z_perp is moved toward the
+    value whose A fits the frames.  The stored A paths are scaled with it, so the fit
+    keeps measuring the remaining ratio.  No step until the paths moved ``min_motion``
+    px (RMS per coordinate) within the window, while A and B are not independent
+    enough to tell apart (the 2 x 2 normal matrix' eigenvalues further apart than
+    1 / ``condition``), and while k1 or k2 is below ``lower`` (frames that hardly move
+    where the model says they should tell no ratio).
+
+    The steps change an estimate between samples, outside eqs (23)-(25)
+    (docs/robust_adaptation.md).
+    """
+
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, condition):
+        self.window = float(window)
+        self.rate = float(rate)
+        self.lower, self.upper = float(lower), float(upper)
+        self.min_motion = float(min_motion)
+        self.horizon = float(horizon)
+        self.condition = float(condition)
+        self.reset()
+
+    def reset(self):
+        # per joint sample, lists of Python floats (as MotionScale's path: cheap at 1 kHz).
+        # The A path and speeds are kept in the units of the estimate at the reset: times
+        # ``self.total`` they are what the current a_z_perp gives, so a step rescales them
+        # all at once
+        self.times, self.path_a, self.path_b, self.speed_a, self.speed_b = [], [], [], [], []
+        self.sums = None            # weighted sums, each (2m,) of: 1, x, a, b, xa, xb, aa,
+        self.t_frame = None         # ab, bb; capture time of the last frame in them
+        self.ratio = 1.0            # the last fitted rho (1: none yet)
+        self.total = 1.0            # the product of every step applied since the reset
+
+    def record(self, t, speed_a, speed_b):
+        """Extend the two paths to joint time t with the model's A and B there, (2m,) each."""
+        unit = 1.0 / self.total
+        speed_a = [v * unit for v in speed_a]
+        speed_b = list(speed_b)
+        if self.times:
+            h = t - self.times[-1]
+            pa = [p + h * v for p, v in zip(self.path_a[-1], self.speed_a[-1])]
+            pb = [p + h * v for p, v in zip(self.path_b[-1], self.speed_b[-1])]
+        else:
+            pa, pb = [0.0] * len(speed_a), [0.0] * len(speed_b)
+        self.times.append(t)
+        self.path_a.append(pa)
+        self.path_b.append(pb)
+        self.speed_a.append(speed_a)
+        self.speed_b.append(speed_b)
+        if t - self.times[0] > 1.5 * self.horizon:
+            trim_buffers(self.times, t, self.horizon, self.path_a, self.path_b, self.speed_a,
+                         self.speed_b)
+
+    def _paths_at(self, stamp):
+        """(P_A, P_B) at ``stamp`` with the current a_z_perp, (2m,) each; None before the first."""
+        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1
+        if i < 0:
+            return None
+        h = stamp - self.times[i]
+        pa = np.array(self.path_a[i]) + h * np.array(self.speed_a[i])
+        pb = np.array(self.path_b[i]) + h * np.array(self.speed_b[i])
+        return self.total * pa, pb
+
+    def frame(self, stamp, x):
+        """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none)."""
+        paths = self._paths_at(stamp)
+        if paths is None or (self.t_frame is not None and stamp <= self.t_frame):
+            return 1.0
+        a, b = paths
+        x = np.asarray(x, dtype=float)
+        if self.sums is None:
+            decay, dt, sums = 0.0, 0.0, np.zeros((9,) + x.shape)
+        else:
+            decay = exp(-(stamp - self.t_frame) / self.window)
+            dt, sums = stamp - self.t_frame, self.sums
+        self.t_frame = stamp
+        sums = decay * sums
+        sums += np.array([np.ones_like(x), x, a, b, x * a, x * b, a * a, a * b, b * b])
+        self.sums = sums
+        w, sx, sa, sb, sxa, sxb, saa, sab, sbb = sums
+        # the centred (co)variances, pooled over the coordinates
+        c_aa = np.sum(saa / w - (sa / w) ** 2)
+        c_bb = np.sum(sbb / w - (sb / w) ** 2)
+        c_ab = np.sum(sab / w - sa * sb / w**2)
+        c_xa = np.sum(sxa / w - sx * sa / w**2)
+        c_xb = np.sum(sxb / w - sx * sb / w**2)
+        motion = (c_aa + 2.0 * c_ab + c_bb) / x.size
+        if not motion > max(self.min_motion ** 2, 1e-12):
+            return 1.0
+        normal = np.array([[c_aa, c_ab], [c_ab, c_bb]])
+        low, high = np.linalg.eigvalsh(normal)
+        if not low > self.condition * high:
+            return 1.0
+        k1, k2 = np.linalg.solve(normal, [c_xa, c_xb])
+        if not (k1 >= self.lower and k2 >= self.lower):
+            # the frames move far less than either part says: no ratio to tell
+            return 1.0
+        self.ratio = min(max(k1 / k2, self.lower), self.upper)
+        step = exp(min(self.rate * dt, 1.0) * log(self.ratio))
+        if step != 1.0:
+            self.rescale(step)
+        return step
+
+    def rescale(self, step):
+        """a_z_perp was scaled by ``step``: so are the A paths and the sums that carry them."""
+        self.total *= step
+        sums = self.sums
+        for k in (2, 4, 7):                 # a, xa, ab
+            sums[k] *= step
+        sums[6] *= step * step              # aa
