@@ -1018,8 +1018,9 @@ class AdaptiveVisualTracker:
 
     def _record_ratio(self, t, x_hat, rate):
         """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
-        jq, z_dot, z = rate
-        self.ratio.record(t, (jq / z).tolist(), (-x_hat * z_dot / z).tolist())
+        jq, z_dot, z = (np.asarray(v).tolist() for v in rate)
+        self.ratio.record(t, [a / c for a, c in zip(jq, z)],
+                          [-u * b / c for u, b, c in zip(x_hat.tolist(), z_dot, z)])
 
     def _scale_a_perp(self, step):
         """a_z_perp *= step between samples (motion_scale.ratio_rate), in either backend."""

@@ -50,7 +50,7 @@ observer and the adaptation keep s (:attr:`MotionScale.reference`).
 from __future__ import annotations
 
 import bisect
-from math import exp, log
+from math import exp, log, sqrt
 
 import numpy as np
 
@@ -274,46 +274,58 @@ class MotionRatio:
                          self.speed_b)
 
     def _paths_at(self, stamp):
-        """(P_A, P_B) at ``stamp`` with the current a_z_perp, (2m,) each; None before the first."""
+        """(P_A, P_B) at ``stamp`` with the current a_z_perp, lists; None before the first."""
         i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1
         if i < 0:
             return None
-        h = stamp - self.times[i]
-        pa = np.array(self.path_a[i]) + h * np.array(self.speed_a[i])
-        pb = np.array(self.path_b[i]) + h * np.array(self.speed_b[i])
-        return self.total * pa, pb
+        h, unit = stamp - self.times[i], self.total
+        pa = [unit * (p + h * v) for p, v in zip(self.path_a[i], self.speed_a[i])]
+        pb = [p + h * v for p, v in zip(self.path_b[i], self.speed_b[i])]
+        return pa, pb
 
     def frame(self, stamp, x):
-        """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none)."""
+        """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none).
+
+        Python floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): at a frame
+        every 1 ms sample numpy's per-call cost would be most of the work.
+        """
         paths = self._paths_at(stamp)
         if paths is None or (self.t_frame is not None and stamp <= self.t_frame):
             return 1.0
         a, b = paths
-        x = np.asarray(x, dtype=float)
+        x = np.asarray(x, dtype=float).tolist()
         if self.sums is None:
-            decay, dt, sums = 0.0, 0.0, np.zeros((9,) + x.shape)
+            decay, dt, sums = 0.0, 0.0, [[0.0] * len(x) for _ in range(9)]
         else:
             decay = exp(-(stamp - self.t_frame) / self.window)
             dt, sums = stamp - self.t_frame, self.sums
         self.t_frame = stamp
-        sums = decay * sums
-        sums += np.array([np.ones_like(x), x, a, b, x * a, x * b, a * a, a * b, b * b])
+        new = (None, x, a, b, [u * v for u, v in zip(x, a)], [u * v for u, v in zip(x, b)],
+               [u * u for u in a], [u * v for u, v in zip(a, b)], [v * v for v in b])
+        sums[0] = [decay * w + 1.0 for w in sums[0]]
+        for k in range(1, 9):
+            sums[k] = [decay * old + value for old, value in zip(sums[k], new[k])]
         self.sums = sums
         w, sx, sa, sb, sxa, sxb, saa, sab, sbb = sums
         # the centred (co)variances, pooled over the coordinates
-        c_aa = np.sum(saa / w - (sa / w) ** 2)
-        c_bb = np.sum(sbb / w - (sb / w) ** 2)
-        c_ab = np.sum(sab / w - sa * sb / w**2)
-        c_xa = np.sum(sxa / w - sx * sa / w**2)
-        c_xb = np.sum(sxb / w - sx * sb / w**2)
-        motion = (c_aa + 2.0 * c_ab + c_bb) / x.size
-        if not motion > max(self.min_motion ** 2, 1e-12):
+        c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
+        for r in range(len(x)):
+            wr = w[r]
+            ma, mb, mx = sa[r] / wr, sb[r] / wr, sx[r] / wr
+            c_aa += saa[r] / wr - ma * ma
+            c_bb += sbb[r] / wr - mb * mb
+            c_ab += sab[r] / wr - ma * mb
+            c_xa += sxa[r] / wr - mx * ma
+            c_xb += sxb[r] / wr - mx * mb
+        if not (c_aa + 2.0 * c_ab + c_bb) / len(x) > max(self.min_motion ** 2, 1e-12):
             return 1.0
-        normal = np.array([[c_aa, c_ab], [c_ab, c_bb]])
-        low, high = np.linalg.eigvalsh(normal)
-        if not low > self.condition * high:
+        # the 2 x 2 normal matrix [[c_aa, c_ab], [c_ab, c_bb]]: its eigenvalues, its solution
+        mean, half = 0.5 * (c_aa + c_bb), sqrt(0.25 * (c_aa - c_bb) ** 2 + c_ab * c_ab)
+        if not mean - half > self.condition * (mean + half):
             return 1.0
-        k1, k2 = np.linalg.solve(normal, [c_xa, c_xb])
+        det = c_aa * c_bb - c_ab * c_ab
+        k1 = (c_bb * c_xa - c_ab * c_xb) / det
+        k2 = (c_aa * c_xb - c_ab * c_xa) / det
         if not (k1 >= self.lower and k2 >= self.lower):
             # the frames move far less than either part says: no ratio to tell
             return 1.0
@@ -328,5 +340,5 @@ class MotionRatio:
         self.total *= step
         sums = self.sums
         for k in (2, 4, 7):                 # a, xa, ab
-            sums[k] *= step
-        sums[6] *= step * step              # aa
+            sums[k] = [step * v for v in sums[k]]
+        sums[6] = [step * step * v for v in sums[6]]      # aa
