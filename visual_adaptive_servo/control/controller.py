@@ -975,9 +975,10 @@ class AdaptiveVisualTracker:
         if frame is not None:
             if self.scale is not None:
                 self.scale.frame(stamp, frame)
-            if self.ratio is not None:
+            if self.ratio is not None and self.t_last is not None:
+                # (the ratio's own paths and sums take the step as it is returned)
                 step = self.ratio.frame(stamp, frame)
-                if step != 1.0 and self.t_last is not None:
+                if step != 1.0:
                     self._scale_a_perp(step)
             x_hat = self.predictor.correct(stamp, frame, t)
         else:
@@ -1369,8 +1370,9 @@ class AdaptiveVisualTracker:
             departures.append(f"motion_scale (window {self.scale.window:g} s, rate "
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
-                              f"start_factor {self.scale.start_factor:g}, ratio_rate "
-                              f"{self.ratio.rate if self.ratio is not None else 0.0:g} /s)")
+                              f"start_factor {self.scale.start_factor:g}"
+                              + (f", ratio_rate {self.ratio.rate:g} /s"
+                                 if self.ratio is not None else "") + ")")
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")
