@@ -784,7 +784,7 @@ class AdaptiveVisualTracker:
         self.predictor.reset()
         if self.scale is not None:
             self.scale.reset()
-        if getattr(self, "ratio", None) is not None:
+        if self.ratio is not None:
             self.ratio.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
@@ -1028,9 +1028,8 @@ class AdaptiveVisualTracker:
         if self._fast_prev is not None:
             # the compiled sample reads the last sample's state from its array: a copy, so
             # the state the last step returned stays what it was
-            layout = self._fast_prev, self._fast_layout
-            self._fast_prev = layout[0].copy()
-            layout = layout[1]
+            layout = self._fast_layout
+            self._fast_prev = self._fast_prev.copy()
             flat = self._fast_prev[layout.state]
             flat[layout.state_ends[0]:layout.state_ends[1]] *= step
             self.state = _frozen(_LazyFlatState, {"_flat": (flat, layout.state_ends)})
