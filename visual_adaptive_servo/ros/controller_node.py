@@ -155,9 +155,9 @@ class RosLogHandler(logging.Handler):
 
     rclpy keys ``throttle_duration_sec`` on the line that calls the node's logger, which
     here would be this handler for every record of a level: one message of the core would
-    silence every other of its level for a second (the start-up report hid the start
-    blend's line that follows it).  So the throttle is kept here, per call site of the core
-    (the record's file and line), on the steady clock.
+    silence every other of its level for a second (the warning that the fallback damping is
+    capped hid the first sample's rejection 1 ms later).  So the throttle is kept here, per
+    call site of the core (the record's file and line), on the steady clock.
     """
 
     #: s between two records of one call site
