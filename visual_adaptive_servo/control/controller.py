@@ -635,6 +635,12 @@ DEPARTURES = ("joint_damping.inertia_rate", "joint_damping.integral_rate",
               "robust.leakage_kinematic", "robust.leakage_dynamic")
 
 
+def joint_labels(model):
+    """(names, prismatic) per joint of ``model``: "joint1".. and revolute where it says none."""
+    names = getattr(model, "joint_names", None) or tuple(f"joint{i + 1}" for i in range(model.n))
+    return tuple(names), tuple(getattr(model, "prismatic", None) or (False,) * model.n)
+
+
 class InputError(ValueError):
     """A measurement was refused; the message names the input and the problem."""
 
@@ -929,9 +935,7 @@ class AdaptiveVisualTracker:
         ``LIMIT_CHECK_PERIOD`` of sample time (not at every sample: a 1 kHz loop's cost).
         """
         lower, upper = self.position_limits[:, 0], self.position_limits[:, 1]
-        names = getattr(self.model, "joint_names", None) or [
-            f"joint{i + 1}" for i in range(self.model.n)]
-        slides = getattr(self.model, "prismatic", None) or (False,) * self.model.n
+        names, slides = joint_labels(self.model)
         for i, value in enumerate(np.asarray(q, dtype=float).tolist()):
             side = ("lower" if value < lower[i] else "upper" if value > upper[i] else None)
             if side is None:
@@ -1341,7 +1345,7 @@ class AdaptiveVisualTracker:
             + (g.K * J_hat.T).dot(J_hat) + g.gamma * M_hat
         rho, rho_joint = sampled_data_margin(positive_definite(M_hat), B, config["sample_time"])
         joint = int(np.argmax(np.nan_to_num(rho_joint, nan=-1.0)))
-        names = getattr(model, "joint_names", [f"joint{i + 1}" for i in range(model.n)])
+        names, prismatic = joint_labels(model)
         margin = (f"sampled-data step T M_hat^-1 (D + J*^T K J* + gamma M_hat) = {rho:.3g} "
                   f"(largest on joint {names[joint]}: {rho_joint[joint]:.3g}; oscillates past 1, "
                   "diverges past 2)")
@@ -1375,8 +1379,6 @@ class AdaptiveVisualTracker:
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")
-        chain = getattr(model, "chain", None)
-        prismatic = tuple(j.prismatic for j in chain.joints) if chain is not None else ()
         report = StartReport(model.n, model.m, model.p_perp, model.p_z, model.p_d,
                              gains, derived,
                              float(sigma[-1]), float(sigma[0]), z_hat, rho, rho_joint, names,
