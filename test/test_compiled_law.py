@@ -99,7 +99,8 @@ CASES = {
                      "controller_node.motion_scale.rate=20.0",
                      "controller_node.motion_scale.min_motion=0.0",
                      "controller_node.motion_scale.ratio_rate=2.0",
-                     "controller_node.motion_scale.ratio_condition=1e-3"] + LATE_CAMERA,
+                     "controller_node.motion_scale.ratio_condition=1e-3",
+                     "controller_node.motion_scale.ratio_band=1000.0"] + LATE_CAMERA,
     "no_motion_scale": ["controller_node.motion_scale.enabled=false"],
     # a start off the trajectory: x_d blended in from the measured point (BlendedStart)
     "start_off": ["controller_node.start_blend_time=0.2"],   # and the start moved (scenario_for)

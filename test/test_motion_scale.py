@@ -335,23 +335,37 @@ def feed_ratio(ratio, k1, k2, duration, noise=0.0, b_like_a=False, seed=0, laten
 def test_the_ratio_scales_a_z_perp_to_what_the_frames_say():
     # A 2.5x too slow relative to B (the truth is 2.5 A + 1.0 B): a_z_perp ends 2.5x larger
     ratio = MotionRatio(window=1.0, rate=1.0, lower=0.2, upper=5.0, min_motion=1.0,
-                        horizon=0.5, condition=0.02)
+                        horizon=0.5, condition=0.02, band=1.5)
     steps = feed_ratio(ratio, 2.5, 1.0, duration=8.0, noise=0.5)
     assert any(s != 1.0 for s in steps)
     assert ratio.total == pytest.approx(2.5, rel=0.03)
     assert ratio.ratio == pytest.approx(1.0, abs=0.03)      # nothing left to correct
     # each step is ln rho times rate dt at most: no jump of the estimate
     assert max(abs(log(s)) for s in steps) <= 1.0 * (FRAME + 1e-9) * log(5.0)
-    # a common scale of A and B is not the ratio's (the motion scale's job)
-    common = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    # a common scale of A and B is not the ratio's (the motion scale's job), even with the
+    # band wide open
+    common = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 5.0)
     feed_ratio(common, 1.7, 1.7, duration=8.0)
     assert common.total == pytest.approx(1.0, rel=1e-6)
 
 
+def test_the_ratio_steps_only_while_the_a_z_part_fits():
+    # a_z_perp and a_z guessed c r and c times the truth leave B exact (k2 = 1, c cancels in
+    # Z_hat_dot / Z_hat); B 2x off is another error, which a step of a_z_perp does not fix
+    other = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, band=1.5)
+    assert set(feed_ratio(other, 2.5, 2.0, duration=8.0, noise=0.5)) == {1.0}
+    assert other.total == 1.0
+    assert other.fit == pytest.approx((2.5, 2.0), rel=0.03)     # fitted, not taken
+    # with the band opened past it the same frames are fitted, k1 / k2 = 1.25 taken
+    wide = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, band=2.5)
+    feed_ratio(wide, 2.5, 2.0, duration=8.0, noise=0.5)
+    assert wide.total == pytest.approx(1.25, rel=0.03)
+
+
 def test_the_ratio_waits_for_motion_that_tells_a_from_b():
-    ratio = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    ratio = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5)
     assert set(feed_ratio(ratio, 2.5, 1.0, duration=3.0, b_like_a=True)) == {1.0}
-    still = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02)
+    still = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5)
     assert set(feed_ratio(still, 0.0, 0.0, duration=1.0)) == {1.0}  # the frames never move
     assert still.total == 1.0
 
@@ -383,8 +397,13 @@ def test_the_ratio_corrects_a_guess_of_a_z_perp_off_relative_to_a_z(tmp_path):
                                duration=10.0, progress=False, record=False, plots=False,
                                controller_factory=factory)
         assert not summary["diverged"]
-        results[rate] = summary["final_rms_true_error_px"], trackers[0].ratio
-    (on, ratio), (off, none) = results[1.0], results[0.0]
-    assert none is None
-    assert ratio.total == pytest.approx(2.0, rel=0.15)
+        results[rate] = summary["final_rms_true_error_px"], trackers[0]
+    (on, tracker), (off, other) = results[1.0], results[0.0]
+    assert other.ratio is None
+    assert tracker.ratio.total == pytest.approx(2.0, rel=0.15)
     assert on < 0.8 * off
+    # the leakage pulls a_z_perp toward the guess the steps corrected, not the first one
+    assert tracker.gains.leakage.kinematic > 0.0
+    np.testing.assert_allclose(tracker.gains.leakage.a_z_perp0,
+                               tracker.ratio.total * np.array(a_perp), rtol=1e-12)
+    np.testing.assert_array_equal(other.gains.leakage.a_z_perp0, a_perp)

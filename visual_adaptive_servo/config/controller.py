@@ -265,6 +265,10 @@ CONTROLLER_PARAMS = (
               "The ratio is fitted only while the two parts of the model's image motion are "
               "this independent (smallest over largest eigenvalue of their 2 x 2 Gram "
               "matrix).", 1e-6, 1.0),
+    ParamSpec("motion_scale.ratio_band", 1.5, "float",
+              "The ratio steps only while the fit's scale of the a_z part is within "
+              "[1/band, band]: errors that are a ratio leave that part exact "
+              "(docs/robust_adaptation.md).", 1.0, None),
     ParamSpec("safety.hold_time", 0.05, "float",
               "Hold the last valid command this long after input goes bad [s].", 0.0, 10.0,
               True),

@@ -742,7 +742,8 @@ class AdaptiveVisualTracker:
         self.ratio = (MotionRatio(config["motion_scale.window"], config["motion_scale.ratio_rate"],
                                   config["motion_scale.lower"], config["motion_scale.upper"],
                                   config["motion_scale.min_motion"], config["max_frame_age"],
-                                  config["motion_scale.ratio_condition"])
+                                  config["motion_scale.ratio_condition"],
+                                  config["motion_scale.ratio_band"])
                       if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
                       else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
@@ -784,14 +785,14 @@ class AdaptiveVisualTracker:
         # complete before the first sample when the configuration gives every gain (D comes
         # at the first sample); otherwise once the missing ones are derived there
         self.designed = {}
+        if self.ratio is not None:
+            self.ratio.reset()          # (before the gains: their leakage target follows it)
         self.gains = (self._gains(np.zeros((self.model.n, self.model.n)))
                       if all(c[name] is not None for name in DESIGNED) else None)
         self._model_rate = None
         self.predictor.reset()
         if self.scale is not None:
             self.scale.reset()
-        if self.ratio is not None:
-            self.ratio.reset()
         self.frames = {"received": 0, "applied": 0, "late": 0, "rejected": 0, "age_sum": 0.0,
                        "age_max": 0.0, "last_age": float("nan")}
         self.outside_limits = set()    # joints past a URDF position limit at the last check
@@ -1028,7 +1029,10 @@ class AdaptiveVisualTracker:
                           [-u * b / c for u, b, c in zip(x_hat.tolist(), z_dot, z)])
 
     def _scale_a_perp(self, step):
-        """a_z_perp *= step between samples (motion_scale.ratio_rate), in either backend."""
+        """a_z_perp *= step between samples (motion_scale.ratio_rate), in either backend.
+
+        The kinematic leakage's target for a_z_perp takes the same step.
+        """
         if self._fast_prev is not None:
             # the compiled sample reads the last sample's state from its array: a copy, so
             # the state the last step returned stays what it was
@@ -1039,6 +1043,12 @@ class AdaptiveVisualTracker:
             self.state = _frozen(_LazyFlatState, {"_flat": (flat, layout.state_ends)})
         else:
             self.state = replace(self.state, a_z_perp=self.state.a_z_perp * step)
+        leak = None if self.gains is None else self.gains.leakage
+        if leak is not None:
+            # the leakage pulls toward the guess the steps corrected, not the first one (a
+            # new Gains: the compiled law packs it again at the next sample)
+            self.gains = replace(self.gains,
+                                 leakage=replace(leak, a_z_perp0=leak.a_z_perp0 * step))
 
     def _commit_prediction(self, t, x_hat, rate, stamp):
         """Store the sample in the predictor (its rate scaled by s) and the scale's path."""
@@ -1374,8 +1384,9 @@ class AdaptiveVisualTracker:
                               f"{self.scale.rate:g} /s, bounds [{self.scale.lower:g}, "
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
                               f"start_factor {self.scale.start_factor:g}"
-                              + (f", ratio_rate {self.ratio.rate:g} /s"
-                                 if self.ratio is not None else "") + ")")
+                              + (f", ratio_rate {self.ratio.rate:g} /s, ratio_band "
+                                 f"{self.ratio.band:g}" if self.ratio is not None else "")
+                              + ")")
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")
@@ -1396,7 +1407,9 @@ class AdaptiveVisualTracker:
                         else designed[name]) for name in DESIGNED}
         c = self.config
         rates = (c["robust.leakage_kinematic"], c["robust.leakage_dynamic"])
-        leakage = (Leakage(*rates, np.array(c.a_z_perp_init), np.array(c.a_z_init),
+        # the leakage's target for a_z_perp: the guess times the ratio's steps so far
+        corrected = 1.0 if self.ratio is None else self.ratio.total
+        leakage = (Leakage(*rates, corrected * np.array(c.a_z_perp_init), np.array(c.a_z_init),
                            np.array(c.a_d_init)) if any(r > 0.0 for r in rates) else None)
         return Gains(value["K"], c.alpha, c.gamma, value["Gamma_d"], value["Gamma_z_perp"],
                      value["Gamma_z"], D if np.any(D) else None, leakage)

@@ -226,20 +226,24 @@ class MotionRatio:
     keeps measuring the remaining ratio.  No step until the paths moved ``min_motion``
     px (RMS per coordinate) within the window, while A and B are not independent
     enough to tell apart (the 2 x 2 normal matrix' eigenvalues further apart than
-    1 / ``condition``), and while k1 or k2 is below ``lower`` (frames that hardly move
-    where the model says they should tell no ratio).
+    1 / ``condition``), while k1 or k2 is below ``lower`` (frames that hardly move
+    where the model says they should tell no ratio), and while k2 is outside
+    ``[1/band, band]``: estimates off by c r (a_z_perp) and c (a_z) leave B exact, c
+    cancelling in Z_hat_dot / Z_hat, so a B far off says the error is another one (a
+    guessed camera moved or turned), which a step of a_z_perp does not correct.
 
     The steps change an estimate between samples, outside eqs (23)-(25)
     (docs/robust_adaptation.md).
     """
 
-    def __init__(self, window, rate, lower, upper, min_motion, horizon, condition):
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, condition, band):
         self.window = float(window)
         self.rate = float(rate)
         self.lower, self.upper = float(lower), float(upper)
         self.min_motion = float(min_motion)
         self.horizon = float(horizon)
         self.condition = float(condition)
+        self.band = float(band)
         self.reset()
 
     def reset(self):
@@ -251,6 +255,7 @@ class MotionRatio:
         self.sums = None            # weighted sums, each (2m,) of: 1, x, a, b, xa, xb, aa,
         self.t_frame = None         # ab, bb; capture time of the last frame in them
         self.ratio = 1.0            # the last fitted rho (1: none yet)
+        self.fit = None             # the last (k1, k2) fitted, stepped on or not
         self.total = 1.0            # the product of every step applied since the reset
 
     def record(self, t, speed_a, speed_b):
@@ -326,8 +331,13 @@ class MotionRatio:
         det = c_aa * c_bb - c_ab * c_ab
         k1 = (c_bb * c_xa - c_ab * c_xb) / det
         k2 = (c_aa * c_xb - c_ab * c_xa) / det
+        self.fit = (k1, k2)
         if not (k1 >= self.lower and k2 >= self.lower):
             # the frames move far less than either part says: no ratio to tell
+            return 1.0
+        if not 1.0 / self.band <= k2 <= self.band:
+            # a_z_perp and a_z off by factors c r and c leave B exact (c cancels in
+            # Z_hat_dot / Z_hat): with B this far off the error is not a ratio
             return 1.0
         self.ratio = min(max(k1 / k2, self.lower), self.upper)
         step = exp(min(self.rate * dt, 1.0) * log(self.ratio))
