@@ -47,7 +47,9 @@ def _exact_kinematics(tmp_path):
 
 
 def _error(path, tmp_path, name, *overrides):
-    scenario = load_scenario(path, list(overrides))
+    # the kinematics are exact: the ratio (motion_scale.ratio_rate) has nothing to learn, and
+    # the small steps its fit still takes (0.0028 -> 0.0055 px here) would blur the dynamics' share
+    scenario = load_scenario(path, ["controller_node.motion_scale.ratio_rate=0", *overrides])
     summary = run_scenario(scenario, str(tmp_path / name), 10.0, progress=False, record=False,
                            plots=False)
     assert not summary["diverged"], summary.get("divergence_reason")

@@ -231,7 +231,8 @@ def test_old_or_repeated_frames_are_ignored():
 def _paper_urdf_run(tmp_path, enabled, duration=10.0):
     """The paper arm (URDF model) with a 30 Hz camera, 33 ms late, 0.5 px, a_z_perp guessed x0.5.
 
-    The estimated image motion is then about half the true one.
+    The estimated image motion is then about half the true one.  The scale alone: the ratio
+    (``motion_scale.ratio_rate``, its own tests below) would correct a_z_perp itself.
     """
     import csv
 
@@ -243,7 +244,8 @@ def _paper_urdf_run(tmp_path, enabled, duration=10.0):
     overrides = ["sim_node.camera_rate=30", "sim_node.camera_latency=0.033",
                  "sim_node.pixel_noise_std=0.5", "controller_node.camera_rate=30",
                  "controller_node.camera_latency=0.033", f"controller_node.a_z_perp_init={a_perp}",
-                 f"controller_node.motion_scale.enabled={str(enabled).lower()}"]
+                 f"controller_node.motion_scale.enabled={str(enabled).lower()}",
+                 "controller_node.motion_scale.ratio_rate=0"]
     scenario = load_scenario(base, overrides)
     out = tmp_path / ("on" if enabled else "off")
     summary = run_scenario(scenario, str(out), duration=duration, progress=False, record=True,

@@ -256,11 +256,10 @@ CONTROLLER_PARAMS = (
     ParamSpec("motion_scale.min_motion", 1.0, "float",
               "RMS per image coordinate the predicted path must move within the window before "
               "s is learnt [px].", 0.0, None),
-    ParamSpec("motion_scale.ratio_rate", 0.0, "float",
+    ParamSpec("motion_scale.ratio_rate", 1.0, "float",
               "Learn, over the same window, how far a_z_perp is off relative to a_z from the "
               "frames' motion, and scale a_z_perp toward the fit at this rate [1/s] (not in "
-              "the paper; docs/robust_adaptation.md: it helps a guess off in that ratio and "
-              "costs the shipped iiwa's guess); 0: off, the default.", 0.0, 100.0),
+              "the paper; docs/robust_adaptation.md); 0: off.", 0.0, 100.0),
     ParamSpec("motion_scale.ratio_condition", 0.02, "float",
               "The ratio is fitted only while the two parts of the model's image motion are "
               "this independent (smallest over largest eigenvalue of their 2 x 2 Gram "
