@@ -1004,7 +1004,7 @@ class AdaptiveVisualTracker:
                 res, fast = self._fast_sample
                 if self.scale is not None:
                     self.scale.record(t, res[fast.speed])
-                if self.ratio is not None:
+                if self.ratio is not None and self.ratio.due(t):
                     m2 = 2 * self.model.m
                     self._record_ratio(t, x_hat, res[fast.model_rate].reshape(3, m2))
                 self.predictor.stored(t, applied)
@@ -1052,7 +1052,7 @@ class AdaptiveVisualTracker:
 
     def _commit_prediction(self, t, x_hat, rate, stamp):
         """Store the sample in the predictor (its rate scaled by s) and the scale's path."""
-        if self.ratio is not None and x_hat is not None:
+        if self.ratio is not None and x_hat is not None and self.ratio.due(t):
             self._record_ratio(t, x_hat, rate)
         if self.scale is not None:
             jq, z_dot, z = rate
