@@ -1471,10 +1471,12 @@ class AdaptiveVisualTracker:
                 self.predictor = self.predictor.to_lists()
             if hasattr(self.scale, "to_lists"):
                 self.scale = self.scale.to_lists()
+            if hasattr(self.ratio, "to_lists"):
+                self.ratio = self.ratio.to_lists()
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
                 from .law_kernels import CompiledLaw
-                from .motion_scale_kernels import BufferedMotionScale
+                from .motion_scale_kernels import BufferedMotionScale, CompiledMotionRatio
                 from .prediction_kernels import BufferedFramePredictor
                 from .sample_kernels import CompiledSample, inputs_valid, supports
 
@@ -1484,6 +1486,8 @@ class AdaptiveVisualTracker:
                 self.predictor = BufferedFramePredictor.of(self.predictor, m2)
                 if self.scale is not None:
                     self.scale = BufferedMotionScale.of(self.scale, m2)
+                if self.ratio is not None:
+                    self.ratio = CompiledMotionRatio.of(self.ratio)
                 self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
                               if supports(self) else None)
         return self._law_kernel

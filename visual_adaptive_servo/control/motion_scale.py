@@ -240,9 +240,9 @@ class MotionRatio:
 
     The steps change an estimate between samples, outside eqs (23)-(25)
     (docs/robust_adaptation.md).  With a frame at every 1 ms sample the paths are
-    extended every ``RATIO_RECORD_INTERVAL`` (the speed held in between) and every
-    ``RATIO_FIT_INTERVAL``-th second's frame is fitted: a 1 s window still holds 100
-    frames, and the ratio costs the 1 kHz step a few us instead of ~25.
+    extended every ``RATIO_RECORD_INTERVAL`` (the speed held in between) and frames
+    captured at least ``RATIO_FIT_INTERVAL`` apart are fitted: a 1 s window still holds
+    100 frames, and the ratio costs the 1 kHz step a few us instead of ~25.
     """
 
     def __init__(self, window, rate, lower, upper, min_motion, horizon, condition, band):
@@ -310,39 +310,22 @@ class MotionRatio:
     def frame(self, stamp, x):
         """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none).
 
-        Python floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): at a frame
-        every 1 ms sample numpy's per-call cost would be most of the work.
+        Python floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): numpy's
+        per-call cost would be most of the work.
         """
         paths = self._paths_at(stamp)
         if paths is None or (self.t_frame is not None
                              and stamp < self.t_frame + RATIO_FIT_INTERVAL - TIME_EPS):
             return 1.0
         a, b = paths
-        x = np.asarray(x, dtype=float).tolist()
         if self.sums is None:
-            decay, dt, sums = 0.0, 0.0, [[0.0] * len(x) for _ in range(9)]
+            decay, dt = 0.0, 0.0
         else:
             decay = exp(-(stamp - self.t_frame) / self.window)
-            dt, sums = stamp - self.t_frame, self.sums
+            dt = stamp - self.t_frame
         self.t_frame = stamp
-        new = (None, x, a, b, [u * v for u, v in zip(x, a)], [u * v for u, v in zip(x, b)],
-               [u * u for u in a], [u * v for u, v in zip(a, b)], [v * v for v in b])
-        sums[0] = [decay * w + 1.0 for w in sums[0]]
-        for k in range(1, 9):
-            sums[k] = [decay * old + value for old, value in zip(sums[k], new[k])]
-        self.sums = sums
-        w, sx, sa, sb, sxa, sxb, saa, sab, sbb = sums
-        # the centred (co)variances, pooled over the coordinates
-        c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
-        for r in range(len(x)):
-            wr = w[r]
-            ma, mb, mx = sa[r] / wr, sb[r] / wr, sx[r] / wr
-            c_aa += saa[r] / wr - ma * ma
-            c_bb += sbb[r] / wr - mb * mb
-            c_ab += sab[r] / wr - ma * mb
-            c_xa += sxa[r] / wr - mx * ma
-            c_xb += sxb[r] / wr - mx * mb
-        if not (c_aa + 2.0 * c_ab + c_bb) / len(x) > max(self.min_motion ** 2, 1e-12):
+        c_aa, c_bb, c_ab, c_xa, c_xb = self._moments(decay, x, a, b)
+        if not (c_aa + 2.0 * c_ab + c_bb) / len(a) > max(self.min_motion ** 2, 1e-12):
             return 1.0
         # the 2 x 2 normal matrix [[c_aa, c_ab], [c_ab, c_bb]]: its eigenvalues, its solution
         mean, half = 0.5 * (c_aa + c_bb), sqrt(0.25 * (c_aa - c_bb) ** 2 + c_ab * c_ab)
@@ -364,6 +347,32 @@ class MotionRatio:
         if step != 1.0:
             self.rescale(step)
         return step
+
+    def _moments(self, decay, x, a, b):
+        """Fold the frame x and the paths a, b at its time into the weighted sums.
+
+        Returns the centred (co)variances pooled over the coordinates: c_aa, c_bb, c_ab,
+        c_xa, c_xb.  (Compiled in :class:`.motion_scale_kernels.CompiledMotionRatio`.)
+        """
+        x = np.asarray(x, dtype=float).tolist()
+        sums = self.sums if self.sums is not None else [[0.0] * len(x) for _ in range(9)]
+        new = (None, x, a, b, [u * v for u, v in zip(x, a)], [u * v for u, v in zip(x, b)],
+               [u * u for u in a], [u * v for u, v in zip(a, b)], [v * v for v in b])
+        sums[0] = [decay * w + 1.0 for w in sums[0]]
+        for k in range(1, 9):
+            sums[k] = [decay * old + value for old, value in zip(sums[k], new[k])]
+        self.sums = sums
+        w, sx, sa, sb, sxa, sxb, saa, sab, sbb = sums
+        c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
+        for r in range(len(x)):
+            wr = w[r]
+            ma, mb, mx = sa[r] / wr, sb[r] / wr, sx[r] / wr
+            c_aa += saa[r] / wr - ma * ma
+            c_bb += sbb[r] / wr - mb * mb
+            c_ab += sab[r] / wr - ma * mb
+            c_xa += sxa[r] / wr - mx * ma
+            c_xb += sxb[r] / wr - mx * mb
+        return c_aa, c_bb, c_ab, c_xa, c_xb
 
     def rescale(self, step):
         """a_z_perp was scaled by ``step``: so are the A paths and the sums that carry them."""

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..models.kernels import compiled
-from .motion_scale import MotionScale
+from .motion_scale import MotionRatio, MotionScale
 from .prediction import first_kept, TIME_EPS
 from .prediction_kernels import make_room
 
@@ -216,3 +216,71 @@ class BufferedMotionScale(MotionScale):
 
     def _make_room(self):
         make_room(self, ("_times", "_path", "_speed"))
+
+
+@compiled(error_model="numpy")
+def _ratio_moments(sums, decay, x, a, b):
+    """MotionRatio._moments on a (9, 2m) array: the same arithmetic in the same order."""
+    m2 = x.shape[0]
+    for r in range(m2):
+        sums[0, r] = decay * sums[0, r] + 1.0
+        sums[1, r] = decay * sums[1, r] + x[r]
+        sums[2, r] = decay * sums[2, r] + a[r]
+        sums[3, r] = decay * sums[3, r] + b[r]
+        sums[4, r] = decay * sums[4, r] + x[r] * a[r]
+        sums[5, r] = decay * sums[5, r] + x[r] * b[r]
+        sums[6, r] = decay * sums[6, r] + a[r] * a[r]
+        sums[7, r] = decay * sums[7, r] + a[r] * b[r]
+        sums[8, r] = decay * sums[8, r] + b[r] * b[r]
+    c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
+    for r in range(m2):
+        wr = sums[0, r]
+        ma, mb, mx = sums[2, r] / wr, sums[3, r] / wr, sums[1, r] / wr
+        c_aa += sums[6, r] / wr - ma * ma
+        c_bb += sums[8, r] / wr - mb * mb
+        c_ab += sums[7, r] / wr - ma * mb
+        c_xa += sums[4, r] / wr - mx * ma
+        c_xb += sums[5, r] / wr - mx * mb
+    return c_aa, c_bb, c_ab, c_xa, c_xb
+
+
+class CompiledMotionRatio(MotionRatio):
+    """:class:`.motion_scale.MotionRatio` with its weighted sums on an array, folded compiled.
+
+    The paths stay lists (a few entries a sample); a fitted frame's sums and moments, most
+    of its cost, run in :func:`_ratio_moments`.  Equal to the reference at every sample of
+    closed-loop runs (test_compiled_law.py).
+    """
+
+    @classmethod
+    def of(cls, ratio):
+        """This ratio's state in a CompiledMotionRatio (the sums as an array)."""
+        new = cls.__new__(cls)
+        new.__dict__.update(ratio.__dict__)
+        if ratio.sums is not None:
+            new.sums = np.array(ratio.sums, dtype=float)
+        # compile (or load) the kernel now, not at the first frame of a 1 kHz loop
+        one = np.ones(2)
+        _ratio_moments(np.zeros((9, 2)), 0.0, one, one, one)
+        return new
+
+    def to_lists(self):
+        """The reference MotionRatio with this state."""
+        ref = MotionRatio.__new__(MotionRatio)
+        ref.__dict__.update(self.__dict__)
+        if self.sums is not None:
+            ref.sums = self.sums.tolist()
+        return ref
+
+    def _moments(self, decay, x, a, b):
+        if self.sums is None:
+            self.sums = np.zeros((9, len(a)))
+        return _ratio_moments(self.sums, decay, np.asarray(x, dtype=float),
+                              np.array(a, dtype=float), np.array(b, dtype=float))
+
+    def rescale(self, step):
+        self.total *= step
+        sums = self.sums
+        for k in (2, 4, 7):                 # a, xa, ab: step * v, as the reference
+            sums[k] *= step
+        sums[6] *= step * step              # aa: (step * step) * v
