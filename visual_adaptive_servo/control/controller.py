@@ -936,7 +936,6 @@ class AdaptiveVisualTracker:
         ``LIMIT_CHECK_PERIOD`` of sample time (not at every sample: a 1 kHz loop's cost).
         """
         lower, upper = self.position_limits[:, 0], self.position_limits[:, 1]
-        names, slides = joint_labels(self.model)
         for i, value in enumerate(np.asarray(q, dtype=float).tolist()):
             side = ("lower" if value < lower[i] else "upper" if value > upper[i] else None)
             if side is None:
@@ -944,6 +943,7 @@ class AdaptiveVisualTracker:
             elif i not in self.outside_limits:
                 self.outside_limits.add(i)
                 self.limit_excursions += 1
+                names, slides = joint_labels(self.model)     # (only for the warning)
                 unit = "m" if slides[i] else "rad"
                 log.warning("joint %s at %.4g %s is past its URDF %s limit %.4g %s (t=%.3f): "
                             "the controller does not keep the arm inside its joint limits; "
