@@ -75,7 +75,7 @@ class Series:
                   "z_hat": (m,),
                   "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
                   "a_z": (model.p_z,), "a_d": (model.p_d,), "sigma_min_J_star": (),
-                  "damped": (), "motion_scale": ()}
+                  "damped": (), "motion_scale": (), "gamma": ()}
         self.data = {k: np.full((steps,) + s, np.nan) for k, s in shapes.items()}
         self.status = []
         self.count = 0
@@ -187,7 +187,7 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                        tau=res.tau,
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d,
                        sigma_min_J_star=res.sigma_min, damped=float(res.damped),
-                       motion_scale=res.motion_scale)
+                       motion_scale=res.motion_scale, gamma=res.gamma)
             series.status.append(res.status)
             if recorder is not None:
                 recorder.record(meas, res, k % diag_every == 0 or res.status != last_status)
@@ -232,7 +232,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                                           "a_z": model.a_z_labels, "a_d": model.a_d_labels})
         if origin is not None:
             reason += f"; grew first: {origin[0]} at t={origin[1]:.3f} s"
-    counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera))
+    counters.update(camera_figures(getattr(ctl, "frames", None), sim.feature_camera,
+                                   getattr(ctl, "frame_noise", math.nan)))
     # times a joint went past its URDF position limit (the controller warned each time)
     counters["joint_limit_excursions"] = getattr(ctl, "limit_excursions", 0)
     counters.update(detections.figures())
@@ -293,10 +294,11 @@ def write_outputs(out_dir, data, status, model, summary, record, plots):
         columns += [f"{key}.{name}" for name in names]
         blocks.append(arr)
     # sigma_min of J* and whether its pseudo-inverse was damped (NaN, 0 when not computed),
-    # and the image-motion scale s (docs/robust_adaptation.md; 1 when off)
-    columns += ["sigma_min_J_star", "damped", "motion_scale"]
+    # the image-motion scale s (docs/robust_adaptation.md; 1 when off), and gamma in effect
+    # (it follows the measured pixel noise: docs/gain_design.md)
+    columns += ["sigma_min_J_star", "damped", "motion_scale", "gamma"]
     blocks += [data["sigma_min_J_star"][:, None], data["damped"][:, None],
-               data["motion_scale"][:, None]]
+               data["motion_scale"][:, None], data["gamma"][:, None]]
     write_csv(os.path.join(out_dir, "timeseries.csv"), columns + ["status"], np.hstack(blocks),
               status)
     if plots and len(data["t"]) > 1:

@@ -98,6 +98,17 @@ CONTROLLER_PARAMS = (
               "Derived adaptation gains: a regressor column counts as carrying at least this "
               "fraction of the strongest column's energy (its gain at most 1/this times the "
               "strongest's).", 1e-9, 1.0),
+    ParamSpec("gain_design.follow_noise", True, "bool",
+              "A derived gamma follows the pixel noise and the tracking error measured in the "
+              "frames: lowered, down to gain_design.noise_min_factor x the delay's, where that "
+              "lowers the tracking error they predict (docs/gain_design.md); false: the "
+              "delay's gamma throughout.  No effect when gamma is given."),
+    ParamSpec("gain_design.noise_window", 3.0, "float",
+              "Window of those measurements, and the time constant with which gamma follows "
+              "them [s].", 1e-3, None),
+    ParamSpec("gain_design.noise_min_factor", 0.25, "float",
+              "The measured noise never lowers gamma below this x the delay's gamma.",
+              1e-3, 1.0),
     *(ParamSpec(f"gain_design.scale.{name}", 1.0, "float",
                 f"The derived {name} times this (when {name} is left out).", 0.0, None)
       for name in DESIGNED),

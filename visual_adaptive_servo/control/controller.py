@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field, replace
-from math import isfinite, sqrt
+from math import isfinite, log as ln, sqrt
 
 import numpy as np
 
 from ..schema import CONTROLLER_SECTION, ConfigError
+from .frame_noise import FrameNoise
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
                           sampled_data_margin, typical_image_speed)
 from .motion_scale import MotionRatio, MotionScale
@@ -47,6 +48,8 @@ log = logging.getLogger(__name__)
 INF = float("inf")
 #: how often the joint positions are checked against the URDF's limits [s of sample time]
 LIMIT_CHECK_PERIOD = 0.01
+#: the measured noise moves gamma in steps of at least this (in ln gamma)
+BANDWIDTH_STEP = 0.01
 _NO_PIXELS = np.empty(0)    # x of a sample without a frame, for sample_kernels.inputs_valid
 
 
@@ -555,6 +558,7 @@ class StepResult:
     tau_unsaturated: np.ndarray | None = None
     flags: dict = field(default_factory=dict)
     motion_scale: float = 1.0   # s of motion_scale.* (1: off, or not learnt yet)
+    gamma: float = float("nan")  # gamma of eq (18) in effect (gain_design.follow_noise)
 
 
 @dataclass(frozen=True)
@@ -746,6 +750,13 @@ class AdaptiveVisualTracker:
                                   config["motion_scale.ratio_band"])
                       if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
                       else None)
+        # the pixel noise and tracking error measured in the frames, and the factor of the
+        # derived gamma they ask for (gain_design.follow_noise): only when gamma is derived
+        self.noise = (FrameNoise(config["gain_design.noise_window"],
+                                 config["gain_design.noise_min_factor"], config["gamma"],
+                                 config["alpha"], config["reference.integral_rate"])
+                      if self.compensate and config["gain_design.follow_noise"]
+                      and "gamma" not in config.explicit else None)
         self.projection = (Projection(config["projection.a_z_perp_min"],
                                       config["projection.a_z_perp_max"],
                                       config["projection.a_z_min"], config["projection.a_z_max"],
@@ -787,6 +798,9 @@ class AdaptiveVisualTracker:
         self.designed = {}
         if self.ratio is not None:
             self.ratio.reset()          # (before the gains: their leakage target follows it)
+        self.bandwidth_factor = 1.0     # of the derived gamma in effect (follow_noise)
+        if self.noise is not None:
+            self.noise.reset()
         self.gains = (self._gains(np.zeros((self.model.n, self.model.n)))
                       if all(c[name] is not None for name in DESIGNED) else None)
         self._model_rate = None
@@ -985,7 +999,10 @@ class AdaptiveVisualTracker:
                 step = self.ratio.frame(stamp, frame)
                 if step != 1.0:
                     self._scale_a_perp(step)
+            prior = self.predictor.prior(stamp, t) if self.noise is not None else None
             x_hat = self.predictor.correct(stamp, frame, t)
+            if prior is not None:
+                self._follow_noise(stamp, frame - prior, frame - self.desired_at(stamp)[0])
         else:
             x_hat = self.predictor.predict(t)
         applied = stamp if frame is not None else None
@@ -1021,6 +1038,30 @@ class AdaptiveVisualTracker:
         self._commit_prediction(t, x_hat, self._prediction_rate(
             self.model.kinematic_tensors(q, qd), qd, self.state), applied)
         return self._reject(t, q, qd, problems)
+
+    def _follow_noise(self, stamp, innovation, error):
+        """Measure the frame's innovation and error x_c - x_d; move gamma with them.
+
+        The gains change in steps of at least BANDWIDTH_STEP (a new Gains: the compiled law
+        packs it again at the next sample, so not at every 1 ms frame).
+        """
+        factor = self.noise.frame(stamp, innovation, error)
+        if abs(ln(factor / self.bandwidth_factor)) < BANDWIDTH_STEP:
+            return
+        self.bandwidth_factor = factor
+        if self.gains is not None:
+            alpha, gamma = self._bandwidths()
+            self.gains = replace(self.gains, alpha=alpha, gamma=gamma)
+
+    @property
+    def frame_noise(self):
+        """The pixel noise measured in the frames [px per coordinate] (NaN: not measured)."""
+        return self.noise.sigma if self.noise is not None else float("nan")
+
+    def _bandwidths(self):
+        """(alpha, gamma) in effect: the configuration's, gamma times the noise's factor."""
+        c = self.config
+        return c.alpha, c.gamma * self.bandwidth_factor
 
     def _record_ratio(self, t, x_hat, rate):
         """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
@@ -1160,7 +1201,7 @@ class AdaptiveVisualTracker:
             "z_hat": out.z_hat, "state": state, "status": "ok", "problems": (),
             "saturated": saturated, "projection_active": out.projection_active,
             "damped": out.damped, "sigma_min": out.sigma_min, "tau_unsaturated": tau_law,
-            "flags": {}, "motion_scale": self._scale_value})
+            "flags": {}, "motion_scale": self._scale_value, "gamma": self.gains.gamma})
 
     def _accepted(self, t, with_frame, tau):
         """Commit what every accepted sample does besides the state.
@@ -1224,7 +1265,7 @@ class AdaptiveVisualTracker:
             "error": res[fast.error], "z_hat": res[fast.z_hat], "state": state, "status": "ok",
             "problems": (), "saturated": saturated, "projection_active": active,
             "damped": damped, "sigma_min": sigma_min, "tau_unsaturated": unsaturated,
-            "flags": {}, "motion_scale": s})
+            "flags": {}, "motion_scale": s, "gamma": self.gains.gamma})
 
     # the rates, the integral and x_d of the last accepted sample: a compiled sample keeps
     # them in its array only (the attributes None), read from there when asked for
@@ -1387,6 +1428,11 @@ class AdaptiveVisualTracker:
                               + (f", ratio_rate {self.ratio.rate:g} /s, ratio_band "
                                  f"{self.ratio.band:g}" if self.ratio is not None else "")
                               + ")")
+        if self.noise is not None:
+            departures.append(f"gain_design.follow_noise (gamma follows the pixel noise and "
+                              f"the tracking error measured in the frames: window "
+                              f"{self.noise.window:g} s, at least "
+                              f"{self.noise.min_factor:g} x the delay's)")
         limit = tuple(config["torque_limit"].tolist())
         limit_source = ("given" if "torque_limit" in explicit
                         else "urdf" if any(np.isfinite(limit)) else "none")
@@ -1411,7 +1457,8 @@ class AdaptiveVisualTracker:
         corrected = 1.0 if self.ratio is None else self.ratio.total
         leakage = (Leakage(*rates, corrected * np.array(c.a_z_perp_init), np.array(c.a_z_init),
                            np.array(c.a_d_init)) if any(r > 0.0 for r in rates) else None)
-        return Gains(value["K"], c.alpha, c.gamma, value["Gamma_d"], value["Gamma_z_perp"],
+        alpha, gamma = self._bandwidths()
+        return Gains(value["K"], alpha, gamma, value["Gamma_d"], value["Gamma_z_perp"],
                      value["Gamma_z"], D if np.any(D) else None, leakage)
 
     @property
@@ -1567,7 +1614,7 @@ def health(result):
     """(level, message, values) of a :class:`StepResult` for /diagnostics."""
     values = {"status": result.status, "saturated": result.saturated,
               "projection_active": result.projection_active, "damped_pinv": result.damped,
-              "sigma_min_J_star": f"{result.sigma_min:.6g}"}
+              "sigma_min_J_star": f"{result.sigma_min:.6g}", "gamma": f"{result.gamma:.6g}"}
     reasons = "; ".join(result.problems)
     if result.status == "fallback":
         return "ERROR", "input bad or stale, fallback torque: " + reasons, values
@@ -1581,12 +1628,13 @@ def health(result):
     return "OK", "tracking", values
 
 
-def frame_values(frames, superseded=0):
-    """/diagnostics values of the camera frames: ages [s] and counts.
+def frame_values(frames, superseded=0, noise=float("nan")):
+    """/diagnostics values of the camera frames: ages [s], counts and noise.
 
     ``frames`` is :attr:`AdaptiveVisualTracker.frames`; ``superseded`` counts the
     frames a node received but never passed on, because a newer one came before
     the next joint sample.  Dropped = refused by the tracker + superseded.
+    ``noise``: :attr:`AdaptiveVisualTracker.frame_noise`.
     """
     applied = frames["applied"]
     mean = frames["age_sum"] / applied if applied else float("nan")
@@ -1595,4 +1643,7 @@ def frame_values(frames, superseded=0):
             "frames_superseded": superseded,
             "frame_age_last": f"{frames['last_age']:.6g}",
             "frame_age_mean": f"{mean:.6g}",
-            "frame_age_max": f"{frames['age_max'] if applied else float('nan'):.6g}"}
+            "frame_age_max": f"{frames['age_max'] if applied else float('nan'):.6g}",
+            # per image coordinate, from the innovations (gain_design.follow_noise; NaN: not
+            # measured)
+            "frame_noise_px": f"{noise:.6g}"}

@@ -125,6 +125,18 @@ class FramePredictor:
             return None
         return self._advance(x, t - self.times[-1], self.rates[-1])
 
+    def prior(self, stamp, t):
+        """x_hat predicted at ``stamp`` before the frame captured then is applied.
+
+        None before the first frame.  ``stamp`` must have passed :meth:`check_stamp`
+        for joint time ``t``; the innovation of that frame is the frame minus this.
+        """
+        if stamp >= t - TIME_EPS:
+            return self.predict(stamp)
+        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1   # last sample <= stamp
+        x = self.history[i]
+        return None if x is None else self._advance(x, stamp - self.times[i], self.rates[i])
+
     def correct(self, stamp, x_frame, t):
         """x_hat at ``t`` with the frame captured at ``stamp`` applied.
 

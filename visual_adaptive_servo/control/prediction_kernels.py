@@ -199,6 +199,19 @@ class BufferedFramePredictor(FramePredictor):
                  self._zeros if isinstance(drift, float) else drift, out)
         return out
 
+    def prior(self, stamp, t):
+        if stamp >= t - TIME_EPS:
+            return self.predict(stamp)
+        a, b = self._start, self._end
+        i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+        if not self._has[i]:
+            return None
+        out = np.empty(self.m2)
+        drift = self.drift
+        _predict(self._history[i], self._rates[i], stamp - self._times[i],
+                 self._zeros if isinstance(drift, float) else drift, out)
+        return out
+
     def correct(self, stamp, x_frame, t):
         x_frame = np.asarray(x_frame, dtype=float)
         if stamp >= t - TIME_EPS:

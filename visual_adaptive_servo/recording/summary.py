@@ -34,11 +34,12 @@ RMS_WINDOW_S = 5.0      # final_rms_*: over the last 5 s of the run
 TRANSIENT_S = 5.0       # transient_* and torque figures: over t >= 5 s
 
 
-def camera_figures(frames, feature_camera):
+def camera_figures(frames, feature_camera, noise=math.nan):
     """Frame counts and ages for summary.json: what the camera sent, what the controller used.
 
     ``frames_dropped`` counts published frames the controller did not apply (refused:
-    invalid, out of order, too old); ``frame_age`` is the time from capture to use.
+    invalid, out of order, too old); ``frame_age`` is the time from capture to use;
+    ``frame_noise_px`` the pixel noise the controller measured in them (NaN: none).
     """
     figures = {"frames_captured": feature_camera.captured,
                "frames_published": feature_camera.published}
@@ -47,7 +48,8 @@ def camera_figures(frames, feature_camera):
         figures.update(frames_applied=applied, frames_late=frames["late"],
                        frames_dropped=frames["received"] - applied,
                        frame_age_mean_s=frames["age_sum"] / applied if applied else math.nan,
-                       frame_age_max_s=frames["age_max"] if applied else math.nan)
+                       frame_age_max_s=frames["age_max"] if applied else math.nan,
+                       frame_noise_px=noise)
     return figures
 
 

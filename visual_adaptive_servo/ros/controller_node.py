@@ -415,7 +415,8 @@ class ControllerNode(Node):
         if not (due or changed):
             return
         level, message, values = health(res)
-        values.update(frame_values(self.tracker.frames, self.superseded))
+        values.update(frame_values(self.tracker.frames, self.superseded,
+                                   getattr(self.tracker, "frame_noise", float("nan"))))
         self.diagnostics_pub.publish(m.diagnostics_to_msg(
             self.msgs, res.t, "controller_node", level, message, values, "controller"))
 
