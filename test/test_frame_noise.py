@@ -82,6 +82,25 @@ def test_the_noise_is_measured_whatever_the_drift_of_the_prediction(sigma, drift
         assert np.sqrt(np.mean(nu[-60:] ** 2) / 2.0) > 1.3 * sigma
 
 
+def test_a_frame_at_every_sample_is_measured_every_10_ms():
+    # 1 kHz frames: a tenth measured, each innovation paired with the previous measured one
+    # (nine frames between: no shared noise), the frames' interval from every frame
+    meter = _meter()
+    rng = np.random.default_rng(4)
+    n = rng.normal(0.0, 0.5, (6001, 6))
+    t = np.arange(6000) * 1e-3
+    measured = 0
+    for k, stamp in enumerate(t):
+        if meter.due(stamp):
+            meter.frame(stamp, n[k + 1] - n[k] + 0.1 * np.sin(stamp), n[k + 1])
+            measured += 1
+        else:
+            meter.skip(stamp)
+    assert measured == pytest.approx(600, abs=2)
+    assert meter.interval == pytest.approx(1e-3, rel=1e-9)
+    assert meter.sigma == pytest.approx(0.5, rel=0.15)
+
+
 @pytest.mark.parametrize("error", [0.0, 0.3, 1.0])
 def test_the_tracking_error_is_measured_beneath_the_noise(error):
     # the frames' error x_c - x_d: a slow tracking error (a new value every 0.5 s, RMS

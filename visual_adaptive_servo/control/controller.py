@@ -799,6 +799,7 @@ class AdaptiveVisualTracker:
         if self.ratio is not None:
             self.ratio.reset()          # (before the gains: their leakage target follows it)
         self.bandwidth_factor = 1.0     # of the derived gamma in effect (follow_noise)
+        self._noise_pending = None      # (stamp, innovation, frame) measured at the next sample
         if self.noise is not None:
             self.noise.reset()
         self.gains = (self._gains(np.zeros((self.model.n, self.model.n)))
@@ -991,6 +992,11 @@ class AdaptiveVisualTracker:
         time and follows x_hat_dot = Z_hat^-1 J_hat(q, x_hat) q_dot from the joint
         samples since (docs/latency.md).
         """
+        if self._noise_pending is not None:
+            # the last frame's measurement, one sample late: the sample with a frame (its
+            # re-prediction) is the costly one
+            self._follow_noise(*self._noise_pending)
+            self._noise_pending = None
         if frame is not None:
             if self.scale is not None:
                 self.scale.frame(stamp, frame)
@@ -999,10 +1005,14 @@ class AdaptiveVisualTracker:
                 step = self.ratio.frame(stamp, frame)
                 if step != 1.0:
                     self._scale_a_perp(step)
-            prior = self.predictor.prior(stamp, t) if self.noise is not None else None
+            noise = self.noise
+            prior = (self.predictor.prior(stamp, t) if noise is not None and noise.due(stamp)
+                     else None)
             x_hat = self.predictor.correct(stamp, frame, t)
             if prior is not None:
-                self._follow_noise(stamp, frame - prior, frame - self.desired_at(stamp)[0])
+                self._noise_pending = (stamp, frame - prior, frame)
+            elif noise is not None:
+                noise.skip(stamp)
         else:
             x_hat = self.predictor.predict(t)
         applied = stamp if frame is not None else None
@@ -1039,13 +1049,13 @@ class AdaptiveVisualTracker:
             self.model.kinematic_tensors(q, qd), qd, self.state), applied)
         return self._reject(t, q, qd, problems)
 
-    def _follow_noise(self, stamp, innovation, error):
-        """Measure the frame's innovation and error x_c - x_d; move gamma with them.
+    def _follow_noise(self, stamp, innovation, frame):
+        """Measure a frame's innovation and error x_c - x_d(t_c); move gamma with them.
 
         The gains change in steps of at least BANDWIDTH_STEP (a new Gains: the compiled law
         packs it again at the next sample, so not at every 1 ms frame).
         """
-        factor = self.noise.frame(stamp, innovation, error)
+        factor = self.noise.frame(stamp, innovation, frame - self.desired_at(stamp)[0])
         if abs(ln(factor / self.bandwidth_factor)) < BANDWIDTH_STEP:
             return
         self.bandwidth_factor = factor
