@@ -99,20 +99,17 @@ class FrameNoise:
     min_factor : float
         The factor never goes below this.
     gamma, alpha : float
-        The delay's gamma, the one the factor multiplies, and alpha [1/s].
+        The delay's gamma, the one the factor multiplies, and alpha, which stays [1/s].
     integral_rate : float
         ``reference.integral_rate`` (kappa / gamma^2).
-    alpha_follows : bool
-        Whether alpha is multiplied by the factor too (else it stays).
     """
 
-    def __init__(self, window, min_factor, gamma, alpha, integral_rate, alpha_follows=False):
+    def __init__(self, window, min_factor, gamma, alpha, integral_rate):
         self.window = float(window)
         self.min_factor = float(min_factor)
         self.gamma = float(gamma)
         self.alpha = float(alpha)
         self.integral_rate = float(integral_rate)
-        self.alpha_follows = bool(alpha_follows)
         self.power = 4.0 if self.integral_rate > 0.0 else 2.0
         self.block = 1.0 / self.gamma
         self._bandwidths = {}
@@ -135,9 +132,7 @@ class FrameNoise:
         self.block_count = 0
 
     def bandwidth(self, factor):
-        """b of :func:`noise_bandwidth` at gamma x ``factor`` (alpha following it or not)."""
-        if self.alpha_follows:
-            factor = 1.0
+        """b of :func:`noise_bandwidth` at gamma x ``factor``, alpha as it is."""
         key = round(100.0 * log(factor))    # cached per 1 % of the factor
         b = self._bandwidths.get(key)
         if b is None:
