@@ -1069,9 +1069,12 @@ class AdaptiveVisualTracker:
         return self.noise.sigma if self.noise is not None else float("nan")
 
     def _bandwidths(self):
-        """(alpha, gamma) in effect: the configuration's, gamma times the noise's factor."""
+        """(alpha, gamma) in effect: the configuration's, a derived gamma times the noise's factor.
+
+        A gamma given (also one given later through :meth:`update_gains`) never moves.
+        """
         c = self.config
-        return c.alpha, c.gamma * self.bandwidth_factor
+        return c.alpha, (c.gamma if "gamma" in c.explicit else c.gamma * self.bandwidth_factor)
 
     def _record_ratio(self, t, x_hat, rate):
         """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
