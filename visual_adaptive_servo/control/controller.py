@@ -1010,7 +1010,8 @@ class AdaptiveVisualTracker:
                      else None)
             x_hat = self.predictor.correct(stamp, frame, t)
             if prior is not None:
-                self._noise_pending = (stamp, frame - prior, frame)
+                # (copied: a caller may reuse its pixel array before the next sample)
+                self._noise_pending = (stamp, frame - prior, frame.copy())
             elif noise is not None:
                 noise.skip(stamp)
         else:
