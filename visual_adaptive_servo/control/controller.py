@@ -1061,21 +1061,20 @@ class AdaptiveVisualTracker:
             return
         self.bandwidth_factor = factor
         if self.gains is not None:
-            alpha, gamma = self._bandwidths()
-            self.gains = replace(self.gains, alpha=alpha, gamma=gamma)
+            self.gains = replace(self.gains, gamma=self._gamma())
 
     @property
     def frame_noise(self):
         """The pixel noise measured in the frames [px per coordinate] (NaN: not measured)."""
         return self.noise.sigma if self.noise is not None else float("nan")
 
-    def _bandwidths(self):
-        """(alpha, gamma) in effect: the configuration's, a derived gamma times the noise's factor.
+    def _gamma(self):
+        """gamma in effect: a derived one times the noise's factor (alpha stays as designed).
 
         A gamma given (also one given later through :meth:`update_gains`) never moves.
         """
         c = self.config
-        return c.alpha, (c.gamma if "gamma" in c.explicit else c.gamma * self.bandwidth_factor)
+        return c.gamma if "gamma" in c.explicit else c.gamma * self.bandwidth_factor
 
     def _record_ratio(self, t, x_hat, rate):
         """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
@@ -1471,8 +1470,7 @@ class AdaptiveVisualTracker:
         corrected = 1.0 if self.ratio is None else self.ratio.total
         leakage = (Leakage(*rates, corrected * np.array(c.a_z_perp_init), np.array(c.a_z_init),
                            np.array(c.a_d_init)) if any(r > 0.0 for r in rates) else None)
-        alpha, gamma = self._bandwidths()
-        return Gains(value["K"], alpha, gamma, value["Gamma_d"], value["Gamma_z_perp"],
+        return Gains(value["K"], c.alpha, self._gamma(), value["Gamma_d"], value["Gamma_z_perp"],
                      value["Gamma_z"], D if np.any(D) else None, leakage)
 
     @property

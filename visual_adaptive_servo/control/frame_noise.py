@@ -168,10 +168,9 @@ class FrameNoise:
             return float("nan")
         return (max(v, 0.0) / w) ** 0.5
 
-    def noise_error(self, factor=None):
-        """sqrt N: the error the noise leaves at gamma x ``factor`` [px per coordinate]."""
-        factor = self.factor if factor is None else factor
-        sigma = self.sigma
+    def noise_error(self):
+        """sqrt N: the error the noise leaves at the gamma in effect [px per coordinate]."""
+        sigma, factor = self.sigma, self.factor
         return (sigma * sigma * self.interval * self.bandwidth(factor) * self.gamma
                 * factor) ** 0.5
 

@@ -133,9 +133,13 @@ class FramePredictor:
         """
         if stamp >= t - TIME_EPS:
             return self.predict(stamp)
-        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1   # last sample <= stamp
+        return self._before(stamp)[1]
+
+    def _before(self, stamp):
+        """(i, x_hat at ``stamp`` from sample i): i the last buffered sample at or before it."""
+        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1
         x = self.history[i]
-        return None if x is None else self._advance(x, stamp - self.times[i], self.rates[i])
+        return i, None if x is None else self._advance(x, stamp - self.times[i], self.rates[i])
 
     def correct(self, stamp, x_frame, t):
         """x_hat at ``t`` with the frame captured at ``stamp`` applied.
@@ -151,10 +155,7 @@ class FramePredictor:
             prior = self.predict(t)
             self._learn_drift(prior, x_frame, stamp)
             return self._blend(prior, x_frame)
-        i = bisect.bisect_right(self.times, stamp + TIME_EPS) - 1   # last sample <= stamp
-        prior = self.history[i]
-        if prior is not None:
-            prior = self._advance(prior, stamp - self.times[i], self.rates[i])
+        i, prior = self._before(stamp)
         self._learn_drift(prior, x_frame, stamp)
         x = self._blend(prior, x_frame)
         # the Euler steps x_{k+1} = x_k + dt_k (jq_k - x_k z_dot_k) / z_k + dt_k b are affine,

@@ -199,11 +199,15 @@ class BufferedFramePredictor(FramePredictor):
                  self._zeros if isinstance(drift, float) else drift, out)
         return out
 
+    def _index_at(self, stamp):
+        """The buffer's row of the last sample at or before ``stamp``."""
+        a, b = self._start, self._end
+        return a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+
     def prior(self, stamp, t):
         if stamp >= t - TIME_EPS:
             return self.predict(stamp)
-        a, b = self._start, self._end
-        i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+        i = self._index_at(stamp)
         if not self._has[i]:
             return None
         out = np.empty(self.m2)
@@ -220,8 +224,8 @@ class BufferedFramePredictor(FramePredictor):
                 # predictor keeps x_hat, this one copies it into its buffer)
                 return x_frame
             return super().correct(stamp, x_frame, t)
-        a, b = self._start, self._end
-        i = a + int(np.searchsorted(self._times[a:b], stamp + TIME_EPS, side="right")) - 1
+        b = self._end
+        i = self._index_at(stamp)
         drift = self._drift_array()
         interval = (stamp - self.last_stamp if self.last_stamp is not None else float("nan"))
         out = np.empty(self.m2)
