@@ -138,6 +138,60 @@ def test_the_bound_keeps_every_joint_within_the_step_and_leaves_unknown_inertia_
     assert fallback_bound(M_hat, np.diag([2000.0, 1.0, 0.0]), T)[0] == 0.0
 
 
+def test_where_joints_move_one_another_the_bound_holds_for_the_whole_matrix():
+    # a planar chain: each joint carries the links after it, so M_hat is far from diagonal
+    # and its lightest mode (3.1e-4) is lighter than any diagonal entry (1e-3 or more)
+    M_hat = 1e-3 * np.array([[3.0, 2.0, 1.0], [2.0, 2.0, 1.0], [1.0, 1.0, 1.0]])
+    T = 0.001
+    D = 0.2 / T * M_hat
+
+    def largest_step(d):
+        return np.max(np.linalg.eigvals(T * np.linalg.solve(M_hat, D + np.diag(d))).real)
+
+    per_joint = FALLBACK_STEP * np.diag(M_hat) / T - np.diag(D)
+    # the oracle: each joint within its own step, the loop together past 2 -- its velocity
+    # error flips sign every sample and grows
+    assert largest_step(per_joint) > 2.0
+    bound = fallback_bound(M_hat, D, T)
+    assert largest_step(bound) == pytest.approx(FALLBACK_STEP, rel=1e-6)
+    np.testing.assert_allclose(bound / per_joint, bound[0] / per_joint[0], rtol=1e-12)
+    # a requested damping the whole matrix allows is applied as requested
+    np.testing.assert_array_equal(fallback_bound(M_hat, D, T, 0.05), [0.05] * 3)
+    largest = largest_step(fallback_bound(M_hat, D, T, 0.5))
+    assert largest == pytest.approx(FALLBACK_STEP, rel=1e-6)
+    # any damping below the bound, joint by joint, stays within
+    for d in (np.minimum(bound, 0.2), 0.5 * bound, bound * [1.0, 0.0, 1.0]):
+        assert largest_step(d) <= FALLBACK_STEP + 1e-12
+        iterate = np.eye(3) - T * np.linalg.solve(M_hat, D + np.diag(d))
+        assert np.max(np.abs(np.linalg.eigvals(iterate))) < 1.0
+
+
+def test_an_unseen_planar_arm_held_by_the_fallback_before_its_first_frame(tmp_path,
+                                                                          monkeypatch):
+    # benchmarks/unseen_arms.py's arm 7: three parallel axes, a real camera's first frame
+    # 33 ms late; the per-joint bounds alone threw its joints to their velocity limits
+    from visual_adaptive_servo.campaigns.unseen_arms import random_arm
+    arm = random_arm(7, str(tmp_path / "arm"))
+    scenario = load_scenario(arm.path, (
+        "sim_node.camera_rate=30", "sim_node.camera_latency=0.033",
+        "sim_node.pixel_noise_std=0.5", "sim_node.seed=1", "controller_node.camera_rate=30",
+        "controller_node.camera_latency=0.033"))
+    summary = run_scenario(scenario, str(tmp_path / "held"), 1.0, progress=False,
+                           record=False, plots=False)
+    assert not summary["diverged"], summary.get("divergence_reason")
+    assert summary["max_true_error_px"] < 10.0
+    per_joint = controller.fallback_bound
+
+    def diagonal_only(M_hat, D, sample_time, requested):
+        M_hat = np.diag(np.diag(M_hat))         # the bound as it was: joint by joint
+        return per_joint(M_hat, np.diag(np.diag(D)), sample_time, requested)
+
+    monkeypatch.setattr(controller, "fallback_bound", diagonal_only)
+    thrown = run_scenario(scenario, str(tmp_path / "thrown"), 1.0, progress=False,
+                          record=False, plots=False)
+    assert thrown["diverged"]
+
+
 def _scenario(tmp_path, torque_limit=NO_LIMIT):
     (tmp_path / "arm.urdf").write_text(URDF)
     path = tmp_path / "arm.yaml"
@@ -154,11 +208,12 @@ def test_a_light_wrist_held_by_the_fallback_until_a_late_first_frame_stays_bound
                                record=False, plots=False)
     assert not summary["diverged"], summary.get("divergence_reason")
     assert summary["max_abs_torque"] < 30.0               # the roll joint's URDF effort
-    assert any("the fallback uses roll" in r.getMessage() for r in records)
+    assert any("the fallback uses" in r.getMessage() and "roll 0." in r.getMessage()
+               for r in records)
     # the oracle: the same run with the fixed 5 N m s/rad on every joint diverges in the
     # 33 ms before the first frame (the fallback's sign-flipping wrist torque)
     monkeypatch.setattr(controller, "fallback_bound",
-                        lambda M_hat, D, sample_time: np.full(len(D), np.inf))
+                        lambda M_hat, D, sample_time, requested: np.full(len(D), requested))
     fixed = run_scenario(scenario, str(tmp_path / "fixed"), 0.3, progress=False,
                          record=False, plots=False)
     assert fixed["diverged"]
@@ -179,7 +234,7 @@ def test_without_a_torque_limit_the_urdf_effort_limits_saturate_the_command(
     # the oracle of the test above: the fixed fallback damping's sign-flipping wrist torque
     # diverges without a limit; with the URDF's limits every command stays within them
     monkeypatch.setattr(controller, "fallback_bound",
-                        lambda M_hat, D, sample_time: np.full(len(D), np.inf))
+                        lambda M_hat, D, sample_time, requested: np.full(len(D), requested))
     summary = run_scenario(scenario, str(tmp_path / "limited"), 0.1, progress=False,
                            record=False, plots=False)
     unlimited = run_scenario(_scenario(tmp_path), str(tmp_path / "unlimited"), 0.1,

@@ -717,7 +717,9 @@ class AdaptiveVisualTracker:
         self.designed = {}          # gains derived at the first joint sample (gain_design.py)
         self.gains = None           # complete once every gain is known (see reset)
         self.damping = None         # D of the joint-space damping, fixed at the first sample
-        self.fallback_bound = None  # largest stable fallback damping per joint, with D
+        self.fallback_bound = None  # the fallback's damping per joint, stable with D
+        self._fallback_inputs = None    # (M_hat, D, T) it was bounded with
+        self._fallback_for = None       # the safety.fallback_damping it was bounded for
         self.report = None          # the start-up report (start_report), at the first sample
         self.compensate = bool(config["latency_compensation"]) and self.compensates_latency
         self._law_backend = self._law_kernel = None     # _compiled_law
@@ -1357,16 +1359,18 @@ class AdaptiveVisualTracker:
         gains = self._gains(D, designed)
         report = self.start_report(q, M_hat, gains)       # raises before anything is kept
         self.damping, self.designed, self.gains, self.report = D, designed, gains, report
-        self.fallback_bound = fallback_bound(M_hat, D, config["sample_time"])
+        self._fallback_inputs = (M_hat, D, config["sample_time"])
+        self._fallback_for = config["safety.fallback_damping"]
+        self.fallback_bound = fallback_bound(*self._fallback_inputs,
+                                             config["safety.fallback_damping"])
         capped = self.fallback_bound < config["safety.fallback_damping"]
         if np.any(capped):
+            used = ", ".join(f"{name} {b:.3g}" for name, b, c in zip(
+                report.joint_names, self.fallback_bound.tolist(), capped.tolist()) if c)
             log.warning("safety.fallback_damping %g N m s/rad is more than the sampled-data "
-                        "bound of the light joints; the fallback uses %s there (T (D + d) / "
-                        "M_hat <= %g)", config["safety.fallback_damping"], ", ".join(
-                            f"{name} {b:.3g}" for name, b, c in zip(
-                                report.joint_names, self.fallback_bound.tolist(),
-                                capped.tolist()) if c),
-                        FALLBACK_STEP)
+                        "bound of the light joints; the fallback uses %s there (the largest "
+                        "step of T M_hat^-1 (D + diag d) <= %g)",
+                        config["safety.fallback_damping"], used, FALLBACK_STEP)
         fast = self._compiled_sample()
         if fast is not None:
             fast.prepare(gains, config, self.projection)    # packed now, not in a later sample
@@ -1584,7 +1588,10 @@ class AdaptiveVisualTracker:
         g_hat = self.model.dynamic_regressor(q, zero, zero, zero) @ self.state.a_d
         d = self.config["safety.fallback_damping"]
         if self.fallback_bound is not None:
-            d = np.minimum(d, self.fallback_bound)
+            if self._fallback_for != d:         # changed while running: bound it again
+                self.fallback_bound = fallback_bound(*self._fallback_inputs, d)
+                self._fallback_for = d
+            d = self.fallback_bound
         tau = g_hat - d * qd
         if self.damping is not None and np.any(self.damping):
             tau = tau - self.damping.dot(qd)
@@ -1595,19 +1602,46 @@ class AdaptiveVisualTracker:
 FALLBACK_STEP = 0.5
 
 
-def fallback_bound(M_hat, D, sample_time):
-    """Per joint, the largest fallback damping d with T (D_jj + d) / M_hat_jj <= FALLBACK_STEP.
+def fallback_bound(M_hat, D, sample_time, requested=np.inf):
+    """The fallback's damping d per joint: ``requested`` where the sampled step allows it.
 
     Pure damping on a sampled joint flips sign every sample and grows once T d / M
     passes 2; a fixed d in N m s/rad is far past that on a light wrist (0.5 kg hand,
-    M about 1e-3 kg m^2: 5 N m s/rad at 1 ms is a step of 5).  The diagonal of the
-    initial estimate's inertia, with margin for its error; never negative.  No bound
-    (inf) on a joint whose estimated inertia is not positive: the estimate says nothing
-    there (the paper's arm starts with a_d = 0).
+    M about 1e-3 kg m^2: 5 N m s/rad at 1 ms is a step of 5).  Per joint, with the
+    diagonal of the initial estimate's inertia, d_j is at most what keeps T (D_jj + d_j) /
+    M_hat_jj <= FALLBACK_STEP (margin for the estimate's error); never negative.  A chain
+    whose joints move one another (parallel axes: a planar arm) has modes far lighter than
+    any diagonal entry, and those per-joint values together can still step past 2
+    (measured: lambda_max(T M_hat^-1 (D + diag(d))) = 4.8 on a planar 3R arm, which the
+    fallback threw to its velocity limits before the first frame); then all of them are
+    scaled by the one factor that brings the largest step of the whole matrix to
+    FALLBACK_STEP.  No bound (inf) on a joint whose estimated inertia is not positive: the
+    estimate says nothing there (the paper's arm starts with a_d = 0).
     """
     M_diag = np.diag(M_hat)
     bound = np.maximum(FALLBACK_STEP * M_diag / sample_time - np.diag(D), 0.0)
-    return np.where(M_diag > 0.0, bound, np.inf)
+    d = np.minimum(requested, np.where(M_diag > 0.0, bound, np.inf))
+    if not np.all(np.isfinite(d)):
+        return d
+    try:
+        L = np.linalg.cholesky(0.5 * (M_hat + M_hat.T))
+    except np.linalg.LinAlgError:
+        return d                # not positive definite: the diagonal is all there is
+
+    def largest_step(scale):
+        X = 0.5 * (D + D.T) + np.diag(scale * d)
+        Y = np.linalg.solve(L, np.linalg.solve(L, X).T)     # L^-1 X L^-T, symmetric
+        return sample_time * np.linalg.eigvalsh(0.5 * (Y + Y.T))[-1]
+
+    if largest_step(1.0) <= FALLBACK_STEP:
+        return d
+    if largest_step(0.0) >= FALLBACK_STEP:
+        return np.zeros_like(d)
+    low, high = 0.0, 1.0        # the step grows with the scale: bisect for it
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if largest_step(mid) <= FALLBACK_STEP else (low, mid)
+    return low * d
 
 
 _TRACKER_LAW = AdaptiveVisualTracker._law
