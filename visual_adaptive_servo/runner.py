@@ -106,7 +106,7 @@ def start_report(ctl, scenario):
     model = scenario.controller.model
     x0, _ = model.project(q0)
     sigma = np.linalg.svd(model.true_image_jacobian(q0, x0), compute_uv=False)[-1]
-    floor = scenario.controller["min_singular_value"]
+    floor = ctl.min_singular_value
     lines.append(f"true J(q0, x0): sigma_min {sigma:.4g} px m/rad"
                  + (f" -- below min_singular_value {floor:g}: near a singular pose"
                     if sigma < floor else ""))

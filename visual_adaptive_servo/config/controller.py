@@ -98,6 +98,10 @@ CONTROLLER_PARAMS = (
               "Derived adaptation gains: a regressor column counts as carrying at least this "
               "fraction of the strongest column's energy (its gain at most 1/this times the "
               "strongest's).", 1e-9, 1.0),
+    ParamSpec("gain_design.singular_fraction", 0.005, "float",
+              "Derived min_singular_value: this fraction of the largest singular value of the "
+              "estimated J(q0, x_d(0)), i.e. J* is damped past a condition number of 1 / this "
+              "(docs/gain_design.md); 0: never damped.", 0.0, 1.0),
     ParamSpec("gain_design.follow_noise", True, "bool",
               "A derived gamma follows the pixel noise and the tracking error measured in the "
               "frames: lowered, down to gain_design.noise_min_factor x the delay's, where that "
@@ -228,7 +232,9 @@ CONTROLLER_PARAMS = (
               None, True, scalar=True),
     ParamSpec("min_singular_value", 0.0, "float",
               "Damp the pseudo-inverse of J* when its smallest singular value drops below "
-              "this [px m/rad]; 0 = never.", 0.0, None, True),
+              "this [px m/rad]; 0 = never.  Left out: gain_design.singular_fraction x the "
+              "largest singular value of the estimated J(q0, x_d(0)), at the first joint "
+              "sample.", 0.0, None, True),
     ParamSpec("max_dt", 0.05, "float",
               "Longest interval integrated in one step [s]; longer gaps are clamped.",
               1e-5, 10.0),

@@ -162,7 +162,7 @@ class VelocityAdaptiveTracker(AdaptiveVisualTracker):
         v = self.velocity(t, x)
         self._pending = (t, x, v)
         return velocity_law(self.model, self.gains, state, q, qd, x, v, xd, xd_dot, xd_ddot,
-                            projection, self.config["min_singular_value"], tensors,
+                            projection, self.min_singular_value, tensors,
                             self.prediction_gain)
 
 
@@ -230,7 +230,7 @@ class CalibratedIBVS(AdaptiveVisualTracker):
 
     def _law(self, t, state, q, qd, x, xd, xd_dot, xd_ddot, tensors, projection, e_int=None):
         return ibvs_law(self.model, q, qd, x, xd, xd_dot, xd_ddot, self.ibvs_gains,
-                        self.config["min_singular_value"], tensors)
+                        self.min_singular_value, tensors)
 
 
 class FrameHoldingTracker(AdaptiveVisualTracker):

@@ -715,6 +715,7 @@ class AdaptiveVisualTracker:
         self.model = config.model
         self.trajectory = config.trajectory
         self.designed = {}          # gains derived at the first joint sample (gain_design.py)
+        self._derived_floor = 0.0   # min_singular_value derived there (when the file has none)
         self.gains = None           # complete once every gain is known (see reset)
         self.damping = None         # D of the joint-space damping, fixed at the first sample
         self.fallback_bound = None  # the fallback's damping per joint, stable with D
@@ -1244,7 +1245,7 @@ class AdaptiveVisualTracker:
         config = self.config
         key = fast.key
         if key is None or key[0] is not self.gains or key[1] is not config:
-            fast.prepare(self.gains, config, self.projection)
+            fast.prepare(self.gains, config, self.projection, self.min_singular_value)
         if self.desired is not fast.desired:
             fast.set_desired(self.desired)
         dt = min(t - self.t_last, config["max_dt"])
@@ -1359,6 +1360,7 @@ class AdaptiveVisualTracker:
         gains = self._gains(D, designed)
         report = self.start_report(q, M_hat, gains)       # raises before anything is kept
         self.damping, self.designed, self.gains, self.report = D, designed, gains, report
+        self._derived_floor = report.gains["min_singular_value"]
         self._fallback_inputs = (M_hat, D, config["sample_time"])
         self._fallback_for = config["safety.fallback_damping"]
         self.fallback_bound = fallback_bound(*self._fallback_inputs,
@@ -1373,7 +1375,8 @@ class AdaptiveVisualTracker:
                         config["safety.fallback_damping"], used, FALLBACK_STEP)
         fast = self._compiled_sample()
         if fast is not None:
-            fast.prepare(gains, config, self.projection)    # packed now, not in a later sample
+            # packed now, not in a later sample
+            fast.prepare(gains, config, self.projection, self.min_singular_value)
 
     def start(self, q):
         """Fix the damping and the gains at joint positions ``q`` now (else at the first sample).
@@ -1425,14 +1428,19 @@ class AdaptiveVisualTracker:
         if rho > 1.0:
             log.warning("start: %s: the velocity loop will ring; lower "
                         "joint_damping.inertia_rate or gamma", margin)
-        if sigma[-1] < config["min_singular_value"]:
+        explicit = getattr(config, "explicit", frozenset())
+        # the damping floor of J*'s pseudo-inverse: the file's, or a fixed fraction of the
+        # estimated J's largest singular value here (a condition number, whatever the units)
+        floor = (config["min_singular_value"] if "min_singular_value" in explicit
+                 else config["gain_design.singular_fraction"] * float(sigma[0]))
+        if sigma[-1] < floor:
             log.warning("start: sigma_min of the estimated J(q, x) is %.3g px m/rad, below "
                         "min_singular_value %.3g: the pseudo-inverse is damped from the start",
-                        sigma[-1], config["min_singular_value"])
-        explicit = getattr(config, "explicit", frozenset())
+                        sigma[-1], floor)
         gains = {"alpha": g.alpha, "gamma": g.gamma, "K": g.K,
                  "joint_damping.inertia_rate": config["joint_damping.inertia_rate"],
-                 "Gamma_d": g.Gamma_d, "Gamma_z_perp": g.Gamma_z_perp, "Gamma_z": g.Gamma_z}
+                 "Gamma_d": g.Gamma_d, "Gamma_z_perp": g.Gamma_z_perp, "Gamma_z": g.Gamma_z,
+                 "min_singular_value": floor}
         derived = tuple(name for name in gains if name not in explicit
                         and not (name == "Gamma_d" and "Gamma_d_normalized" in explicit))
         departures = [f"{name} {config[name]:g}" for name in DEPARTURES if config[name] > 0.0
@@ -1508,11 +1516,22 @@ class AdaptiveVisualTracker:
         if compiled is not None:
             return _flat_law_output(compiled, *compiled.evaluate(
                 self.gains, state, q, qd, x, xd, xd_dot, xd_ddot, projection,
-                self.config["min_singular_value"], tensors, integral, motion_scale,
-                reference_scale))
+                self.min_singular_value, tensors, integral, motion_scale, reference_scale))
         return control_law(self.model, self.gains, state, q, qd, x, xd, xd_dot, xd_ddot,
-                           projection, self.config["min_singular_value"], tensors, integral,
+                           projection, self.min_singular_value, tensors, integral,
                            motion_scale, reference_scale)
+
+    @property
+    def min_singular_value(self):
+        """The damping floor of J*'s pseudo-inverse in effect [px m/rad].
+
+        The configuration's when it gives one (also when changed while running), else
+        ``gain_design.singular_fraction`` x sigma_max of the estimated J(q0, x_d(0)),
+        fixed at the start (0 before it).
+        """
+        if "min_singular_value" in self.config.explicit:
+            return self.config["min_singular_value"]
+        return self._derived_floor
 
     def _compiled_law(self):
         """:class:`~.law_kernels.CompiledLaw` when the model runs the compiled backend, else None.

@@ -490,16 +490,17 @@ class CompiledSample:
         self.desired = trajectory
         self._warm()
 
-    def prepare(self, gains, config, projection):
+    def prepare(self, gains, config, projection, min_singular_value):
         """Pack the constants of these gains, configuration and projection (when they changed).
 
-        ``config``: the tracker's controller configuration (integral rate,
-        min_singular_value, torque limit).
+        ``config``: the tracker's controller configuration (integral rate, torque
+        limit); ``min_singular_value`` the damping floor of J* in effect.
         """
-        if self.key is not None and self.key[0] is gains and self.key[1] is config:
+        key = self.key
+        if (key is not None and key[0] is gains and key[1] is config
+                and key[2] == min_singular_value):
             return
         kappa = config["reference.integral_rate"] * gains.gamma ** 2
-        min_singular_value = config["min_singular_value"]
         torque_limit = config["torque_limit"]
         law = self.law
         if projection is not None:
@@ -515,7 +516,7 @@ class CompiledSample:
         k_i = config["joint_damping.integral_rate"] if gains.D is not None else 0.0
         self.cf, self.ci = self._pack(flat, scalars, bounds, torque_limit,
                                       projection is not None, kappa > 0.0, k_i)
-        self.key = (gains, config)
+        self.key = (gains, config, min_singular_value)
 
     def _pack(self, flat, scalars, bounds, torque_limit, project, integral, k_i):
         law = self.law
