@@ -46,7 +46,6 @@ import logging
 import math
 import os
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 
@@ -55,9 +54,13 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from benchlib import environment  # noqa: E402
 
+from visual_adaptive_servo.campaigns.engine import DIVERGENCE_REASON, execute_run  # noqa: E402
+from visual_adaptive_servo.campaigns.spec import DEFAULT_CONTROLLER, Run  # noqa: E402
 from visual_adaptive_servo.campaigns.unseen_arms import random_arm  # noqa: E402
-from visual_adaptive_servo.config.scenario import load_scenario  # noqa: E402
-from visual_adaptive_servo.runner import Progress, run_scenario  # noqa: E402
+from visual_adaptive_servo.runner import Progress  # noqa: E402
+
+#: the figures kept of each run (its summary.json keys)
+FIGURES = ("diverged", "final_rms_true_error_px", "max_true_error_px", "max_abs_torque")
 
 REAL_CAMERA = ("sim_node.camera_rate=30", "sim_node.camera_latency=0.033",
                "sim_node.pixel_noise_std=0.5", "controller_node.camera_rate=30",
@@ -77,16 +80,13 @@ def quiet():
 
 
 def run_one(job):
-    """One run in a worker: (arm fields, condition, summary figures)."""
+    """One run in a worker (the campaigns' run function): (arm fields, condition, figures)."""
     arm, name, overrides, duration = job
-    scenario = load_scenario(arm["path"], overrides)
-    with tempfile.TemporaryDirectory() as folder:      # its timeseries.csv is not kept
-        summary = run_scenario(scenario, folder, duration=duration, progress=False,
-                               record=False, plots=False)
-    keys = ("diverged", "divergence_reason", "final_rms_true_error_px", "max_true_error_px",
-            "max_abs_torque")
-    figures = {key: summary.get(key) for key in keys}
-    return arm, name, figures
+    run = Run(0, {}, arm["path"], duration, DEFAULT_CONTROLLER, overrides)
+    figures = execute_run(run, figures=FIGURES)
+    return arm, name, {"diverged": figures["diverged"],
+                       DIVERGENCE_REASON: figures.get(DIVERGENCE_REASON, ""),
+                       **{key: figures[key] for key in FIGURES[1:]}}
 
 
 def summarize(rows, names):
