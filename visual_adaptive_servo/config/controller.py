@@ -285,6 +285,10 @@ CONTROLLER_PARAMS = (
               "The ratio steps only while the fit's scale of the a_z part is within "
               "[1/band, band]: errors that are a ratio leave that part exact "
               "(docs/robust_adaptation.md).", 1.0, None),
+    ParamSpec("motion_scale.ratio_evidence", 0.5, "float",
+              "The ratio steps only while its two-part fit explains at least this share of "
+              "what one scale leaves beyond the frames' measured noise: a guessed camera moved "
+              "or turned is not a ratio (docs/robust_adaptation.md); 0: no test.", 0.0, 1.0),
     ParamSpec("safety.hold_time", 0.05, "float",
               "Hold the last valid command this long after input goes bad [s].", 0.0, 10.0,
               True),

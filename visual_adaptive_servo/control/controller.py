@@ -750,7 +750,8 @@ class AdaptiveVisualTracker:
                                   config["motion_scale.lower"], config["motion_scale.upper"],
                                   config["motion_scale.min_motion"], config["max_frame_age"],
                                   config["motion_scale.ratio_condition"],
-                                  config["motion_scale.ratio_band"])
+                                  config["motion_scale.ratio_band"],
+                                  config["motion_scale.ratio_evidence"])
                       if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
                       else None)
         # the pixel noise and tracking error measured in the frames, and the factor of the
@@ -1005,7 +1006,7 @@ class AdaptiveVisualTracker:
                 self.scale.frame(stamp, frame)
             if self.ratio is not None and self.t_last is not None:
                 # (the ratio's own paths and sums take the step as it is returned)
-                step = self.ratio.frame(stamp, frame)
+                step = self.ratio.frame(stamp, frame, self._noise_variance())
                 if step != 1.0:
                     self._scale_a_perp(step)
             noise = self.noise
@@ -1065,6 +1066,11 @@ class AdaptiveVisualTracker:
         self.bandwidth_factor = factor
         if self.gains is not None:
             self.gains = replace(self.gains, gamma=self._gamma())
+
+    def _noise_variance(self):
+        """sigma^2 of the frames' noise as measured (gain_design.follow_noise) [px^2], or None."""
+        sigma = self.frame_noise
+        return sigma * sigma if sigma == sigma else None
 
     @property
     def frame_noise(self):
@@ -1451,7 +1457,8 @@ class AdaptiveVisualTracker:
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
                               f"start_factor {self.scale.start_factor:g}"
                               + (f", ratio_rate {self.ratio.rate:g} /s, ratio_band "
-                                 f"{self.ratio.band:g}" if self.ratio is not None else "")
+                                 f"{self.ratio.band:g}, ratio_evidence {self.ratio.evidence:g}"
+                                 if self.ratio is not None else "")
                               + ")")
         if self.noise is not None:
             departures.append(f"gain_design.follow_noise (gamma follows the pixel noise and "

@@ -211,6 +211,9 @@ def _numpy_sum(values):
 RATIO_RECORD_INTERVAL = 0.005
 #: and fits frames captured at least this far apart [s] (a 30-60 Hz camera: every frame)
 RATIO_FIT_INTERVAL = 0.01
+#: the evidence test of MotionRatio judges a fit only when one scale leaves more than this
+#: share of the frames' noise beyond it: below, no residual tells a ratio from another error
+EVIDENCE_SIGNIFICANT = 0.5
 
 
 class MotionRatio:
@@ -236,7 +239,10 @@ class MotionRatio:
     where the model says they should tell no ratio), and while k2 is outside
     ``[1/band, band]``: estimates off by c r (a_z_perp) and c (a_z) leave B exact, c
     cancelling in Z_hat_dot / Z_hat, so a B far off says the error is another one (a
-    guessed camera moved or turned), which a step of a_z_perp does not correct.
+    guessed camera moved or turned), which a step of a_z_perp does not correct.  With
+    ``evidence`` > 0 and the frames' noise measured, no step either while the two-part fit
+    explains less than that share of what one scale leaves beyond the noise
+    (:meth:`_evident`).
 
     The steps change an estimate between samples, outside eqs (23)-(25)
     (docs/robust_adaptation.md).  With a frame at every 1 ms sample the paths are
@@ -245,7 +251,8 @@ class MotionRatio:
     100 frames, and the ratio costs the 1 kHz step a few us instead of ~25.
     """
 
-    def __init__(self, window, rate, lower, upper, min_motion, horizon, condition, band):
+    def __init__(self, window, rate, lower, upper, min_motion, horizon, condition, band,
+                 evidence=0.0):
         self.window = float(window)
         self.rate = float(rate)
         self.lower, self.upper = float(lower), float(upper)
@@ -253,6 +260,7 @@ class MotionRatio:
         self.horizon = float(horizon)
         self.condition = float(condition)
         self.band = float(band)
+        self.evidence = float(evidence)
         self.reset()
 
     def reset(self):
@@ -262,10 +270,11 @@ class MotionRatio:
         # all at once
         self.times, self.path_a, self.path_b, self.speed_a, self.speed_b = [], [], [], [], []
         self.sums = None            # weighted sums, each (2m,) of: 1, x, a, b, xa, xb, aa,
-        self.t_frame = None         # ab, bb; capture time of the last frame in them
+        self.t_frame = None         # ab, bb, xx; capture time of the last frame in them
         self.ratio = 1.0            # the last fitted rho (1: none yet)
         self.fit = None             # the last (k1, k2) fitted, stepped on or not
         self.total = 1.0            # the product of every step applied since the reset
+        self.shown = float("nan")   # the share the last evidence test found (see _evident)
 
     def due(self, t):
         """Whether :meth:`record` takes a joint sample at time t (RATIO_RECORD_INTERVAL)."""
@@ -307,11 +316,13 @@ class MotionRatio:
         pb = [p + h * v for p, v in zip(self.path_b[i], self.speed_b[i])]
         return pa, pb
 
-    def frame(self, stamp, x):
+    def frame(self, stamp, x, noise=None):
         """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none).
 
-        Python floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): numpy's
-        per-call cost would be most of the work.
+        ``noise``: the frames' pixel noise variance per coordinate [px^2] as measured, None
+        until it is: the evidence test (``evidence``) runs only once it is known.  Python
+        floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): numpy's per-call
+        cost would be most of the work.
         """
         if self.t_frame is not None and stamp < self.t_frame + RATIO_FIT_INTERVAL - TIME_EPS:
             return 1.0                  # (before the paths: 9 of 10 frames at 1 kHz)
@@ -325,7 +336,7 @@ class MotionRatio:
             decay = exp(-(stamp - self.t_frame) / self.window)
             dt = stamp - self.t_frame
         self.t_frame = stamp
-        c_aa, c_bb, c_ab, c_xa, c_xb = self._moments(decay, x, a, b)
+        c_aa, c_bb, c_ab, c_xa, c_xb, c_xx = self._moments(decay, x, a, b)
         if not (c_aa + 2.0 * c_ab + c_bb) / len(a) > max(self.min_motion ** 2, 1e-12):
             return 1.0
         # the 2 x 2 normal matrix [[c_aa, c_ab], [c_ab, c_bb]]: its eigenvalues, its solution
@@ -343,28 +354,50 @@ class MotionRatio:
             # a_z_perp and a_z off by factors c r and c leave B exact (c cancels in
             # Z_hat_dot / Z_hat): with B this far off the error is not a ratio
             return 1.0
+        if (self.evidence > 0.0 and noise is not None
+                and not self._evident(c_aa, c_bb, c_ab, c_xa, c_xb, c_xx, k1, k2,
+                                      len(a) * noise)):
+            return 1.0
         self.ratio = min(max(k1 / k2, self.lower), self.upper)
         step = exp(min(self.rate * dt, 1.0) * log(self.ratio))
         if step != 1.0:
             self.rescale(step)
         return step
 
+    def _evident(self, c_aa, c_bb, c_ab, c_xa, c_xb, c_xx, k1, k2, floor):
+        """Whether the frames show a ratio (``evidence``, ``motion_scale.ratio_evidence``).
+
+        left1 = the residual of x_c against one scale of P_A + P_B (what :class:`MotionScale`
+        can do), left2 = the residual of the two-part fit; ``floor`` = the pixel noise's share
+        of either (2m sigma^2, pooled).  An error that is a ratio leaves left2 at the floor,
+        so (left1 - left2) / (left1 - floor) is near 1; a guess moved or turned leaves a
+        residual that no ratio explains, and a fit of it is no correction.
+        """
+        left1 = c_xx - (c_xa + c_xb) ** 2 / (c_aa + 2.0 * c_ab + c_bb)
+        left2 = c_xx - (k1 * c_xa + k2 * c_xb)
+        excess = left1 - floor
+        self.shown = (left1 - left2) / excess if excess > 0.0 else 0.0
+        if not excess > EVIDENCE_SIGNIFICANT * floor:
+            return True     # no more than the noise left: nothing tells a ratio from another
+        return left1 - left2 >= self.evidence * excess
+
     def _moments(self, decay, x, a, b):
         """Fold the frame x and the paths a, b at its time into the weighted sums.
 
         Returns the centred (co)variances pooled over the coordinates: c_aa, c_bb, c_ab,
-        c_xa, c_xb.  (Compiled in :class:`.motion_scale_kernels.CompiledMotionRatio`.)
+        c_xa, c_xb, c_xx.  (Compiled in :class:`.motion_scale_kernels.CompiledMotionRatio`.)
         """
         x = np.asarray(x, dtype=float).tolist()
-        sums = self.sums if self.sums is not None else [[0.0] * len(x) for _ in range(9)]
+        sums = self.sums if self.sums is not None else [[0.0] * len(x) for _ in range(10)]
         new = (None, x, a, b, [u * v for u, v in zip(x, a)], [u * v for u, v in zip(x, b)],
-               [u * u for u in a], [u * v for u, v in zip(a, b)], [v * v for v in b])
+               [u * u for u in a], [u * v for u, v in zip(a, b)], [v * v for v in b],
+               [u * u for u in x])
         sums[0] = [decay * w + 1.0 for w in sums[0]]
-        for k in range(1, 9):
+        for k in range(1, 10):
             sums[k] = [decay * old + value for old, value in zip(sums[k], new[k])]
         self.sums = sums
-        w, sx, sa, sb, sxa, sxb, saa, sab, sbb = sums
-        c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
+        w, sx, sa, sb, sxa, sxb, saa, sab, sbb, sxx = sums
+        c_aa = c_bb = c_ab = c_xa = c_xb = c_xx = 0.0
         for r in range(len(x)):
             wr = w[r]
             ma, mb, mx = sa[r] / wr, sb[r] / wr, sx[r] / wr
@@ -373,7 +406,8 @@ class MotionRatio:
             c_ab += sab[r] / wr - ma * mb
             c_xa += sxa[r] / wr - mx * ma
             c_xb += sxb[r] / wr - mx * mb
-        return c_aa, c_bb, c_ab, c_xa, c_xb
+            c_xx += sxx[r] / wr - mx * mx
+        return c_aa, c_bb, c_ab, c_xa, c_xb, c_xx
 
     def rescale(self, step):
         """a_z_perp was scaled by ``step``: so are the A paths and the sums that carry them."""

@@ -220,7 +220,7 @@ class BufferedMotionScale(MotionScale):
 
 @compiled(error_model="numpy")
 def _ratio_moments(sums, decay, x, a, b):
-    """MotionRatio._moments on a (9, 2m) array: the same arithmetic in the same order."""
+    """MotionRatio._moments on a (10, 2m) array: the same arithmetic in the same order."""
     m2 = x.shape[0]
     for r in range(m2):
         sums[0, r] = decay * sums[0, r] + 1.0
@@ -232,7 +232,8 @@ def _ratio_moments(sums, decay, x, a, b):
         sums[6, r] = decay * sums[6, r] + a[r] * a[r]
         sums[7, r] = decay * sums[7, r] + a[r] * b[r]
         sums[8, r] = decay * sums[8, r] + b[r] * b[r]
-    c_aa = c_bb = c_ab = c_xa = c_xb = 0.0
+        sums[9, r] = decay * sums[9, r] + x[r] * x[r]
+    c_aa = c_bb = c_ab = c_xa = c_xb = c_xx = 0.0
     for r in range(m2):
         wr = sums[0, r]
         ma, mb, mx = sums[2, r] / wr, sums[3, r] / wr, sums[1, r] / wr
@@ -241,7 +242,8 @@ def _ratio_moments(sums, decay, x, a, b):
         c_ab += sums[7, r] / wr - ma * mb
         c_xa += sums[4, r] / wr - mx * ma
         c_xb += sums[5, r] / wr - mx * mb
-    return c_aa, c_bb, c_ab, c_xa, c_xb
+        c_xx += sums[9, r] / wr - mx * mx
+    return c_aa, c_bb, c_ab, c_xa, c_xb, c_xx
 
 
 class CompiledMotionRatio(MotionRatio):
@@ -261,7 +263,7 @@ class CompiledMotionRatio(MotionRatio):
             new.sums = np.array(ratio.sums, dtype=float)
         # compile (or load) the kernel now, not at the first frame of a 1 kHz loop
         one = np.ones(2)
-        _ratio_moments(np.zeros((9, 2)), 0.0, one, one, one)
+        _ratio_moments(np.zeros((10, 2)), 0.0, one, one, one)
         return new
 
     def to_lists(self):
@@ -274,7 +276,7 @@ class CompiledMotionRatio(MotionRatio):
 
     def _moments(self, decay, x, a, b):
         if self.sums is None:
-            self.sums = np.zeros((9, len(a)))
+            self.sums = np.zeros((10, len(a)))
         return _ratio_moments(self.sums, decay, np.asarray(x, dtype=float),
                               np.array(a, dtype=float), np.array(b, dtype=float))
 
