@@ -395,8 +395,8 @@ def test_the_ratio_steps_only_on_evidence_that_the_error_is_a_ratio():
     early = ratio(0.5)
     feed_ratio(early, 1.0, 1.0, duration=8.0, noise=0.5, other=1.0, told=False)
     assert early.total == pytest.approx(blind.total, rel=1e-12)
-    # the same noise left in the residual as an error, not told as noise (a clean camera):
-    # the test judges all of it, and the pure ratio's fit still shows
+    # a clean camera (its noise measured as 0): the test judges the whole residual, and the
+    # pure ratio's fit still shows
     clean = ratio(0.5)
     feed_ratio(clean, 2.5, 1.0, duration=8.0, told=True)
     assert clean.total == pytest.approx(2.5, rel=0.03)
