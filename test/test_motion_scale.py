@@ -317,7 +317,7 @@ def feed_ratio(ratio, k1, k2, duration, noise=0.0, b_like_a=False, seed=0, laten
     ``ratio.total`` times what it was.  ``other``: the truth also moves this much along a
     third motion that neither part has (a guessed camera moved or turned), three parts of it
     uncorrelated with A and B and one along A.  ``told``: the frames' noise variance is
-    passed as measured (else None, not yet).  Returns the steps.
+    given as measured (else not: no test).  Returns the steps.
     """
     rng = np.random.default_rng(seed)
     t_next_frame, pending, steps, truth = 0.0, [], [], []
@@ -336,7 +336,7 @@ def feed_ratio(ratio, k1, k2, duration, noise=0.0, b_like_a=False, seed=0, laten
             stamp = pending.pop(0)
             x = 300.0 + T * np.sum([v for tt, v in truth if tt < stamp], axis=0)
             steps.append(ratio.frame(stamp, x + noise * rng.standard_normal(4),
-                                     noise * noise if told else None))
+                                     (lambda: noise * noise) if told else None))
         ratio.record(t, (ratio.total * a).tolist(), b.tolist())
     return steps
 

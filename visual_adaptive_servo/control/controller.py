@@ -1006,7 +1006,7 @@ class AdaptiveVisualTracker:
                 self.scale.frame(stamp, frame)
             if self.ratio is not None and self.t_last is not None:
                 # (the ratio's own paths and sums take the step as it is returned)
-                step = self.ratio.frame(stamp, frame, self._noise_variance())
+                step = self.ratio.frame(stamp, frame, self._noise_variance)
                 if step != 1.0:
                     self._scale_a_perp(step)
             noise = self.noise

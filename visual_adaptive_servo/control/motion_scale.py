@@ -319,10 +319,11 @@ class MotionRatio:
     def frame(self, stamp, x, noise=None):
         """Add the frame captured at ``stamp``; the factor to scale a_z_perp by now (1: none).
 
-        ``noise``: the frames' pixel noise variance per coordinate [px^2] as measured, None
-        until it is: the evidence test (``evidence``) runs only once it is known.  Python
-        floats throughout (2m <= 6 values a coordinate, a 2 x 2 system): numpy's per-call
-        cost would be most of the work.
+        ``noise``: a callable giving the frames' pixel noise variance per coordinate [px^2]
+        as measured, or None until it is (None: never measured); the evidence test
+        (``evidence``) runs only once it is known, and asks only for the frames it judges,
+        not for the 9 of 10 skipped at 1 kHz.  Python floats throughout (2m <= 6 values a
+        coordinate, a 2 x 2 system): numpy's per-call cost would be most of the work.
         """
         if self.t_frame is not None and stamp < self.t_frame + RATIO_FIT_INTERVAL - TIME_EPS:
             return 1.0                  # (before the paths: 9 of 10 frames at 1 kHz)
@@ -354,10 +355,11 @@ class MotionRatio:
             # a_z_perp and a_z off by factors c r and c leave B exact (c cancels in
             # Z_hat_dot / Z_hat): with B this far off the error is not a ratio
             return 1.0
-        if (self.evidence > 0.0 and noise is not None
-                and not self._evident(c_aa, c_bb, c_ab, c_xa, c_xb, c_xx, k1, k2,
-                                      len(a) * noise)):
-            return 1.0
+        if self.evidence > 0.0 and noise is not None:
+            variance = noise()
+            if variance is not None and not self._evident(c_aa, c_bb, c_ab, c_xa, c_xb, c_xx,
+                                                          k1, k2, len(a) * variance):
+                return 1.0
         self.ratio = min(max(k1 / k2, self.lower), self.upper)
         step = exp(min(self.rate * dt, 1.0) * log(self.ratio))
         if step != 1.0:
