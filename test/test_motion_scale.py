@@ -310,34 +310,35 @@ def test_a_rejected_sample_reports_the_scale_it_keeps(tmp_path):
 
 # -- the ratio of a_z_perp to a_z (motion_scale.ratio_rate) -----------------------------------
 def feed_ratio(ratio, k1, k2, duration, noise=0.0, b_like_a=False, seed=0, latency=0.033,
-               other=0.0, told=False):
+               other=0.0, told=False, b_size=15.0):
     """Joint samples of a model whose A, B parts are k1, k2 times too slow; frames of the truth.
 
     The model's a_z_perp follows the ratio's steps, as the controller's does: its A is
     ``ratio.total`` times what it was.  ``other``: the truth also moves this much along a
     third motion that neither part has (a guessed camera moved or turned), three parts of it
     uncorrelated with A and B and one along A.  ``told``: the frames' noise variance is
-    given as measured (else not: no test).  Returns the steps.
+    given as measured (else not: no test).  ``b_size``: B's amplitude (A's is 20) [px/s].
+    Returns the steps.
     """
     rng = np.random.default_rng(seed)
-    t_next_frame, pending, steps, truth = 0.0, [], [], []
+    t_next_frame, pending, steps = 0.0, [], []
+    position = [np.full(4, 300.0)]          # the truth's pixels at each sample
     for k in range(int(round(duration / T))):
         t = k * T
         a = 20.0 * np.array([np.cos(2 * t), np.sin(3 * t), -np.sin(2 * t), np.cos(t)])
         b = (a.copy() if b_like_a
-             else 15.0 * np.array([np.sin(t), np.cos(2 * t), np.cos(3 * t), -np.sin(t)]))
+             else b_size * np.array([np.sin(t), np.cos(2 * t), np.cos(3 * t), -np.sin(t)]))
         c = 20.0 * np.array([np.sin(1.3 * t), -np.cos(2.5 * t), np.sin(0.7 * t),
                              np.cos(1.7 * t)]) + 0.3 * a
-        truth.append((t, k1 * a + k2 * b + other * c))     # the true image velocity
         if t >= t_next_frame - 1e-12:
-            pending.append(t)
+            pending.append(k)
             t_next_frame += FRAME
-        while pending and pending[0] <= t - latency + 1e-12:
-            stamp = pending.pop(0)
-            x = 300.0 + T * np.sum([v for tt, v in truth if tt < stamp], axis=0)
-            steps.append(ratio.frame(stamp, x + noise * rng.standard_normal(4),
+        while pending and pending[0] * T <= t - latency + 1e-12:
+            j = pending.pop(0)
+            steps.append(ratio.frame(j * T, position[j] + noise * rng.standard_normal(4),
                                      (lambda: noise * noise) if told else None))
         ratio.record(t, (ratio.total * a).tolist(), b.tolist())
+        position.append(position[-1] + T * (k1 * a + k2 * b + other * c))
     return steps
 
 
@@ -402,17 +403,61 @@ def test_the_ratio_steps_only_on_evidence_that_the_error_is_a_ratio():
     assert clean.total == pytest.approx(2.5, rel=0.03)
 
 
-def test_the_compiled_ratio_tests_the_evidence_as_the_reference():
+def test_the_ratio_s_significance_spread_is_the_fit_s_own_scatter():
+    # (motion_scale.ratio_significance) no ratio in the truth, 1 px of noise told: across noise
+    # seeds k1 - k2 of the last fit scatters by the spread the test computes from the noise,
+    # the window's weights and the normal matrix (a test that never steps keeps the runs alike)
+    fits, spreads = [], []
+    for seed in range(60):
+        ratio = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 5.0, significance=1e6)
+        assert set(feed_ratio(ratio, 1.0, 1.0, duration=3.0, noise=1.0, seed=seed,
+                              told=True)) == {1.0}
+        fits.append(ratio.fit[0] - ratio.fit[1])
+        spreads.append(ratio.spread)
+    assert np.mean(fits) == pytest.approx(0.0, abs=3 * np.std(fits) / np.sqrt(len(fits)))
+    assert np.std(fits) == pytest.approx(np.mean(spreads), rel=0.25)
+    assert np.std(spreads) < 0.1 * np.mean(spreads)
+
+
+def test_the_ratio_fits_a_small_a_z_part_once_the_noise_is_measured():
+    # B 15x smaller than A (the Panda's: its depth hardly changes): the normal matrix'
+    # eigenvalues are further apart than 1 / ratio_condition although A and B are independent.
+    # Unmeasured noise: the condition rules, no step.  Measured (0.3 px): the significance
+    # test judges the fit instead, and a_z_perp is scaled toward the truth's 2x until what is
+    # left is within 3 standard deviations of the fit's noise (1 s of frames: 7 % here)
+    def ratio():
+        return MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, significance=3.0)
+
+    blind = ratio()
+    assert set(feed_ratio(blind, 2.0, 1.0, duration=8.0, noise=0.3, b_size=1.3)) == {1.0}
+    told = ratio()
+    feed_ratio(told, 2.0, 1.0, duration=8.0, noise=0.3, b_size=1.3, told=True)
+    assert 1.75 < told.total < 2.02
+    assert 0.0 < told.fit[0] - told.fit[1] < 3.0 * told.spread < 0.15
+    # no ratio in the truth, 1 px of noise: with the test at 3 standard deviations the ratio
+    # stays within a few % of 1; with it at 0.1 (every fit taken) the noise walks it further
+    calm, loose = [], []
+    for seed in range(4):
+        for z, out in ((3.0, calm), (0.1, loose)):
+            r = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, significance=z)
+            feed_ratio(r, 1.0, 1.0, duration=6.0, noise=1.0, b_size=1.3, seed=seed, told=True)
+            out.append(abs(log(r.total)))
+    assert max(calm) < 0.03 and max(calm) < 0.5 * max(loose)
+
+
+def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference():
     from visual_adaptive_servo.control.motion_scale_kernels import CompiledMotionRatio
 
     for other, k1 in ((1.0, 1.0), (0.0, 2.5)):
-        ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5)
-        fast = CompiledMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5))
+        ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0)
+        fast = CompiledMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5,
+                                                  3.0))
         a = feed_ratio(ref, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         b = feed_ratio(fast, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         np.testing.assert_allclose(b, a, rtol=1e-12)
         assert fast.total == pytest.approx(ref.total, rel=1e-12)
         assert fast.shown == pytest.approx(ref.shown, rel=1e-9, abs=1e-12)
+        assert fast.spread == pytest.approx(ref.spread, rel=1e-9)
 
 
 def test_the_ratio_extends_its_paths_every_5_ms_and_fits_frames_10_ms_apart():

@@ -278,9 +278,10 @@ CONTROLLER_PARAMS = (
               "frames' motion, and scale a_z_perp toward the fit at this rate [1/s] (not in "
               "the paper; docs/robust_adaptation.md); 0: off.", 0.0, 100.0),
     ParamSpec("motion_scale.ratio_condition", 0.02, "float",
-              "The ratio is fitted only while the two parts of the model's image motion are "
-              "this independent (smallest over largest eigenvalue of their 2 x 2 Gram "
-              "matrix).", 1e-6, 1.0),
+              "Until the frames' noise is measured, the ratio is fitted only while the two "
+              "parts of the model's image motion are this independent (smallest over largest "
+              "eigenvalue of their 2 x 2 Gram matrix); then motion_scale.ratio_significance "
+              "judges the fit instead.", 1e-6, 1.0),
     ParamSpec("motion_scale.ratio_band", 1.5, "float",
               "The ratio steps only while the fit's scale of the a_z part is within "
               "[1/band, band]: errors that are a ratio leave that part exact "
@@ -289,6 +290,11 @@ CONTROLLER_PARAMS = (
               "The ratio steps only while its two-part fit explains at least this share of "
               "what one scale leaves beyond the frames' measured noise: a guessed camera moved "
               "or turned is not a ratio (docs/robust_adaptation.md); 0: no test.", 0.0, 1.0),
+    ParamSpec("motion_scale.ratio_significance", 3.0, "float",
+              "Once the frames' noise is measured, the ratio steps only while its fit's "
+              "k1 - k2 is this many of its standard deviations (from the noise) away from 0, "
+              "in place of motion_scale.ratio_condition (docs/robust_adaptation.md); 0: no "
+              "test, the condition throughout.", 0.0, 100.0),
     ParamSpec("safety.hold_time", 0.05, "float",
               "Hold the last valid command this long after input goes bad [s].", 0.0, 10.0,
               True),

@@ -751,7 +751,8 @@ class AdaptiveVisualTracker:
                                   config["motion_scale.min_motion"], config["max_frame_age"],
                                   config["motion_scale.ratio_condition"],
                                   config["motion_scale.ratio_band"],
-                                  config["motion_scale.ratio_evidence"])
+                                  config["motion_scale.ratio_evidence"],
+                                  config["motion_scale.ratio_significance"])
                       if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
                       else None)
         # the pixel noise and tracking error measured in the frames, and the factor of the
@@ -1457,7 +1458,8 @@ class AdaptiveVisualTracker:
                               f"{self.scale.upper:g}], initial {self.scale.initial:g}, "
                               f"start_factor {self.scale.start_factor:g}"
                               + (f", ratio_rate {self.ratio.rate:g} /s, ratio_band "
-                                 f"{self.ratio.band:g}, ratio_evidence {self.ratio.evidence:g}"
+                                 f"{self.ratio.band:g}, ratio_evidence {self.ratio.evidence:g}, "
+                                 f"ratio_significance {self.ratio.significance:g}"
                                  if self.ratio is not None else "")
                               + ")")
         if self.noise is not None:

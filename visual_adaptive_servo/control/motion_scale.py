@@ -214,6 +214,8 @@ RATIO_FIT_INTERVAL = 0.01
 #: the evidence test of MotionRatio judges a fit only when one scale leaves more than this
 #: share of the frames' noise beyond it: below, no residual tells a ratio from another error
 EVIDENCE_SIGNIFICANT = 0.5
+#: with the significance test in charge, the normal matrix only has to be invertible
+CONDITION_FLOOR = 1e-9
 
 
 class MotionRatio:
@@ -242,7 +244,10 @@ class MotionRatio:
     guessed camera moved or turned), which a step of a_z_perp does not correct.  With
     ``evidence`` > 0 and the frames' noise measured, no step either while the two-part fit
     explains less than that share of what one scale leaves beyond the noise
-    (:meth:`_evident`).
+    (:meth:`_evident`).  With ``significance`` > 0 and the noise measured, the condition
+    gives way to a test of the fit against that noise: a step only while k1 - k2 is that
+    many of its standard deviations away from 0 (:meth:`_significant`), so parts of unequal
+    size are fitted, and near the truth the noise no longer walks the ratio.
 
     The steps change an estimate between samples, outside eqs (23)-(25)
     (docs/robust_adaptation.md).  With a frame at every 1 ms sample the paths are
@@ -252,7 +257,7 @@ class MotionRatio:
     """
 
     def __init__(self, window, rate, lower, upper, min_motion, horizon, condition, band,
-                 evidence=0.0):
+                 evidence=0.0, significance=0.0):
         self.window = float(window)
         self.rate = float(rate)
         self.lower, self.upper = float(lower), float(upper)
@@ -261,6 +266,7 @@ class MotionRatio:
         self.condition = float(condition)
         self.band = float(band)
         self.evidence = float(evidence)
+        self.significance = float(significance)
         self.reset()
 
     def reset(self):
@@ -271,10 +277,12 @@ class MotionRatio:
         self.times, self.path_a, self.path_b, self.speed_a, self.speed_b = [], [], [], [], []
         self.sums = None            # weighted sums, each (2m,) of: 1, x, a, b, xa, xb, aa,
         self.t_frame = None         # ab, bb, xx; capture time of the last frame in them
+        self.weight2 = 0.0          # the sum of the squared frame weights (with sums[0])
         self.ratio = 1.0            # the last fitted rho (1: none yet)
         self.fit = None             # the last (k1, k2) fitted, stepped on or not
         self.total = 1.0            # the product of every step applied since the reset
         self.shown = float("nan")   # the share the last evidence test found (see _evident)
+        self.spread = float("nan")  # the sd of k1 - k2 the last significance test found
 
     def due(self, t):
         """Whether :meth:`record` takes a joint sample at time t (RATIO_RECORD_INTERVAL)."""
@@ -321,8 +329,8 @@ class MotionRatio:
 
         ``noise``: a callable giving the frames' pixel noise variance per coordinate [px^2]
         as measured, or None until it is (None: never measured); the evidence test
-        (``evidence``) runs only once it is known, and asks only for the frames it judges,
-        not for the 9 of 10 skipped at 1 kHz.  Python floats throughout (2m <= 6 values a
+        (``evidence``) and the significance test (``significance``) run only once it is known,
+        and it is asked only for the frames fitted, not for the 9 of 10 skipped at 1 kHz.  Python floats throughout (2m <= 6 values a
         coordinate, a 2 x 2 system): numpy's per-call cost would be most of the work.
         """
         if self.t_frame is not None and stamp < self.t_frame + RATIO_FIT_INTERVAL - TIME_EPS:
@@ -337,12 +345,18 @@ class MotionRatio:
             decay = exp(-(stamp - self.t_frame) / self.window)
             dt = stamp - self.t_frame
         self.t_frame = stamp
+        self.weight2 = decay * decay * self.weight2 + 1.0
         c_aa, c_bb, c_ab, c_xa, c_xb, c_xx = self._moments(decay, x, a, b)
         if not (c_aa + 2.0 * c_ab + c_bb) / len(a) > max(self.min_motion ** 2, 1e-12):
             return 1.0
-        # the 2 x 2 normal matrix [[c_aa, c_ab], [c_ab, c_bb]]: its eigenvalues, its solution
+        variance = (noise() if noise is not None
+                    and (self.evidence > 0.0 or self.significance > 0.0) else None)
+        tested = self.significance > 0.0 and variance is not None
+        # the 2 x 2 normal matrix [[c_aa, c_ab], [c_ab, c_bb]]: its eigenvalues, its solution.
+        # With the noise measured, the significance test says whether the fit is determined;
+        # until then (or without it) the condition does
         mean, half = 0.5 * (c_aa + c_bb), sqrt(0.25 * (c_aa - c_bb) ** 2 + c_ab * c_ab)
-        if not mean - half > self.condition * (mean + half):
+        if not (mean - half > (CONDITION_FLOOR if tested else self.condition) * (mean + half)):
             return 1.0
         det = c_aa * c_bb - c_ab * c_ab
         k1 = (c_bb * c_xa - c_ab * c_xb) / det
@@ -355,16 +369,32 @@ class MotionRatio:
             # a_z_perp and a_z off by factors c r and c leave B exact (c cancels in
             # Z_hat_dot / Z_hat): with B this far off the error is not a ratio
             return 1.0
-        if self.evidence > 0.0 and noise is not None:
-            variance = noise()
-            if variance is not None and not self._evident(c_aa, c_bb, c_ab, c_xa, c_xb, c_xx,
-                                                          k1, k2, len(a) * variance):
-                return 1.0
+        if tested and not self._significant(c_aa, c_bb, c_ab, det, k1, k2, variance):
+            return 1.0
+        if (self.evidence > 0.0 and variance is not None
+                and not self._evident(c_aa, c_bb, c_ab, c_xa, c_xb, c_xx, k1, k2,
+                                      len(a) * variance)):
+            return 1.0
         self.ratio = min(max(k1 / k2, self.lower), self.upper)
         step = exp(min(self.rate * dt, 1.0) * log(self.ratio))
         if step != 1.0:
             self.rescale(step)
         return step
+
+    def _significant(self, c_aa, c_bb, c_ab, det, k1, k2, variance):
+        """Whether k1 - k2 (a ratio other than 1) stands out of the noise (``significance``).
+
+        The fit's weighted least squares over n_eff = W1^2 / W2 frames (W1, W2 the sums of
+        the frames' weights and of their squares) with the noise sigma^2 per coordinate has
+        Cov(k1, k2) = sigma^2 / n_eff G^-1, G the pooled 2 x 2 normal matrix, so
+        var(k1 - k2) = sigma^2 / n_eff (c_aa + 2 c_ab + c_bb) / det.  Parts that hardly move
+        (or move together) make it large, whatever their scale.
+        """
+        w1 = self.sums[0][0]
+        n_eff = w1 * w1 / self.weight2
+        spread = variance / n_eff * (c_aa + 2.0 * c_ab + c_bb) / det
+        self.spread = sqrt(spread)
+        return (k1 - k2) ** 2 > self.significance ** 2 * spread
 
     def _evident(self, c_aa, c_bb, c_ab, c_xa, c_xb, c_xx, k1, k2, floor):
         """Whether the frames show a ratio (``evidence``, ``motion_scale.ratio_evidence``).
