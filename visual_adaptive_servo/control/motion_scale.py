@@ -329,9 +329,10 @@ class MotionRatio:
 
         ``noise``: a callable giving the frames' pixel noise variance per coordinate [px^2]
         as measured, or None until it is (None: never measured); the evidence test
-        (``evidence``) and the significance test (``significance``) run only once it is known,
-        and it is asked only for the frames fitted, not for the 9 of 10 skipped at 1 kHz.  Python floats throughout (2m <= 6 values a
-        coordinate, a 2 x 2 system): numpy's per-call cost would be most of the work.
+        (``evidence``) and the significance test (``significance``) run only once it is
+        known, and it is asked only for the frames fitted, not for the 9 of 10 skipped at
+        1 kHz.  Python floats throughout (2m <= 6 values a coordinate, a 2 x 2 system):
+        numpy's per-call cost would be most of the work.
         """
         if self.t_frame is not None and stamp < self.t_frame + RATIO_FIT_INTERVAL - TIME_EPS:
             return 1.0                  # (before the paths: 9 of 10 frames at 1 kHz)
