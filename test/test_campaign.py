@@ -43,7 +43,7 @@ from visual_adaptive_servo.campaigns.engine import (
     RAY_MISSING,
     RayCluster,
 )
-from visual_adaptive_servo.campaigns.report import wilson_interval
+from visual_adaptive_servo.campaigns.report import markdown, summarize, wilson_interval
 from visual_adaptive_servo.campaigns.spec import load_spec, SpecError, yaml_text
 from visual_adaptive_servo.control.registry import CONTROLLER_NAMES
 from visual_adaptive_servo.config.files import apply_overrides
@@ -337,6 +337,22 @@ def test_rows_repeat_exactly_and_their_commands_reproduce_them(tmp_path):
     for name in ("summary.md", "summary.json", "error_histogram.png",
                  "error_vs_controller.png", "error_vs_estimate_scale.a_z.png"):
         assert os.path.exists(tmp_path / "a" / name), name
+    # the transient (after 5 s) is summarised beside the last 5 s, so that a longer
+    # transient shows where the end is better (these runs are shorter than 5 s: NaN)
+    assert all(math.isnan(first["quantiles"][key]["p50"])
+               for key in ("transient_rms_true_error_px", "transient_max_true_error_px"))
+    rng = np.random.default_rng(3)
+    longer = [{**r, "transient_rms_true_error_px": a, "transient_max_true_error_px": b}
+              for r, (a, b) in zip(rows, rng.random((len(rows), 2)))]
+    calm = [r for r in longer if r["status"] == "finished" and not r["diverged"]]
+    summary = summarize(longer, [], len(longer))
+    for key in ("transient_rms_true_error_px", "transient_max_true_error_px"):
+        values = [r[key] for r in calm]
+        expected = np.quantile(values, 0.95)
+        assert summary["quantiles"][key]["p95"] == pytest.approx(expected, rel=1e-12), key
+        assert summary["quantiles"][key]["max"] == max(values), key
+    text = markdown(summary, "t", [])
+    assert "| max true image error after 5 s [px] |" in text
     # an offset start with a baseline: the row's command, run by vas in its own process
     row = next(r for r in rows if r["factors"]["case"] == "offset"
                and r["factors"]["controller"] == "velocity-lp")

@@ -33,6 +33,8 @@ QUANTILES = (("p5", 0.05), ("p50", 0.5), ("p95", 0.95))
 QUANTILE_FIGURES = (("final_rms_true_error_px", "true RMS image error, last 5 s [px]"),
                     ("final_rms_error_px", "measured RMS image error, last 5 s [px]"),
                     ("max_true_error_px", "max true image error [px]"),
+                    ("transient_rms_true_error_px", "true RMS image error after 5 s [px]"),
+                    ("transient_max_true_error_px", "max true image error after 5 s [px]"),
                     ("max_abs_torque", "max abs(tau) [N m]"),
                     ("wall_time_s", "wall time per run [s]"))
 WORST = 10
@@ -106,7 +108,8 @@ def summarize(rows, level_factors, total_runs, interrupted=False):
         "interrupted": interrupted,
         "divergence": _rate(rows),
         "quantiles_over": "finished runs that did not diverge",
-        "quantiles": {key: quantiles([r[key] for r in calm]) for key, _ in QUANTILE_FIGURES},
+        "quantiles": {key: quantiles([r.get(key) for r in calm])
+                      for key, _ in QUANTILE_FIGURES},
         "by_factor": by_factor,
         "worst": [{"id": r["id"], "factors": r["factors"], "diverged": r["diverged"],
                    "reason": r.get("reason", "") if r["diverged"] else "",
