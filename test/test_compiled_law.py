@@ -398,8 +398,8 @@ def test_compiled_law_equals_numpy_at_every_sample_of_a_closed_loop_run(
         # the ratio's steps of a_z_perp between samples, in both trackers alike (the states
         # are compared at every step)
         assert seen["tracker"].ratio.total != 1.0, "a_z_perp was never scaled by the ratio"
-        # the compiled tracker folds the ratio's sums compiled, the reference on lists
-        assert type(seen["tracker"].ratio).__name__ == "CompiledMotionRatio"
+        # the compiled tracker keeps the ratio's paths and sums on arrays, the reference on lists
+        assert type(seen["tracker"].ratio).__name__ == "BufferedMotionRatio"
         assert type(shadow.ratio).__name__ == "MotionRatio"
         # the reference's slow start (motion_scale.start_factor 2) held, then decayed
         assert seen["start_held"] > 0 and seen["start_decaying"] > 0, seen

@@ -445,19 +445,60 @@ def test_the_ratio_fits_a_small_a_z_part_once_the_noise_is_measured():
     assert max(calm) < 0.03 and max(calm) < 0.5 * max(loose)
 
 
-def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference():
-    from visual_adaptive_servo.control.motion_scale_kernels import CompiledMotionRatio
+@pytest.mark.parametrize("kind", ["sums", "buffered"])
+def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference(kind):
+    from visual_adaptive_servo.control.motion_scale_kernels import (BufferedMotionRatio,
+                                                                    CompiledMotionRatio)
+
+    def compiled(ratio):
+        # the buffered one from 8 rows: make_room moves and doubles its arrays on the way
+        return (CompiledMotionRatio.of(ratio) if kind == "sums"
+                else BufferedMotionRatio.of(ratio, 4, capacity=8))
 
     for other, k1 in ((1.0, 1.0), (0.0, 2.5)):
         ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0)
-        fast = CompiledMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5,
-                                                  3.0))
+        fast = compiled(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0))
         a = feed_ratio(ref, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         b = feed_ratio(fast, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         np.testing.assert_allclose(b, a, rtol=1e-12)
         assert fast.total == pytest.approx(ref.total, rel=1e-12)
         assert fast.shown == pytest.approx(ref.shown, rel=1e-9, abs=1e-12)
         assert fast.spread == pytest.approx(ref.spread, rel=1e-9)
+        if kind == "buffered":
+            # the same paths, trimmed alike (0.5 s horizon): back on lists, equal to the digit
+            back = fast.to_lists()
+            assert back.times == ref.times and back.path_a == ref.path_a
+            assert back.speed_b == ref.speed_b and back.sums == ref.sums
+
+
+def test_the_buffered_ratio_takes_the_models_rate_as_the_tracker_gives_it():
+    # record_rate(t, x_hat, jq, z_dot, z) against the reference's record of
+    # A = jq / z and B = -x_hat z_dot / z made the controller's way, step by step
+    from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionRatio
+
+    rng = np.random.default_rng(7)
+    ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 0.0, 0.5, 0.02, 1.5, 0.5, 3.0)
+    fast = BufferedMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 0.0, 0.5, 0.02, 1.5, 0.5,
+                                              3.0), 4, capacity=4)
+    steps_ref, steps_fast = [], []
+    for k in range(3000):
+        t = k * T
+        jq, z_dot = rng.normal(0.0, 30.0, 4), rng.normal(0.0, 0.2, 4)
+        z, x_hat = rng.uniform(1.0, 2.0, 4), rng.uniform(-300.0, 300.0, 4)
+        if ref.due(t):
+            ref.record(t, [a / c for a, c in zip(jq.tolist(), z.tolist())],
+                       [-u * b / c for u, b, c in zip(x_hat.tolist(), z_dot.tolist(),
+                                                      z.tolist())])
+        assert fast.due(t) == ref.due(t) or not ref.due(t)
+        fast.record_rate(t, x_hat, jq, z_dot, z)
+        if k % 33 == 0 and k > 0:
+            frame = rng.uniform(-300.0, 300.0, 4)
+            steps_ref.append(ref.frame(t - 0.01, frame, lambda: 0.25))
+            steps_fast.append(fast.frame(t - 0.01, frame, lambda: 0.25))
+    assert steps_fast == steps_ref          # bit for bit, steps taken or not
+    back = fast.to_lists()
+    assert back.times == ref.times and back.speed_a == ref.speed_a
+    assert back.path_b == ref.path_b and back.total == ref.total
 
 
 def test_the_ratio_extends_its_paths_every_5_ms_and_fits_frames_10_ms_apart():

@@ -1088,6 +1088,11 @@ class AdaptiveVisualTracker:
 
     def _record_ratio(self, t, x_hat, rate):
         """Extend the ratio's paths: A = J_perp_hat q_dot / Z_hat, B = -x_hat Z_hat_dot / Z_hat."""
+        record_rate = getattr(self.ratio, "record_rate", None)
+        if record_rate is not None:
+            # (compiled: the rate's rows as they are, no list made)
+            record_rate(t, x_hat, *(np.ascontiguousarray(v, dtype=float) for v in rate))
+            return
         jq, z_dot, z = (np.asarray(v).tolist() for v in rate)
         self.ratio.record(t, [a / c for a, c in zip(jq, z)],
                           [-u * b / c for u, b, c in zip(x_hat.tolist(), z_dot, z)])
@@ -1550,7 +1555,8 @@ class AdaptiveVisualTracker:
         whole in one compiled call (:mod:`.sample_kernels`), and the frame predictor
         and the image-motion scale keep their buffers in arrays with their steps
         compiled (:class:`~.prediction_kernels.BufferedFramePredictor`,
-        :class:`~.motion_scale_kernels.BufferedMotionScale`); followed when the
+        :class:`~.motion_scale_kernels.BufferedMotionScale`, and the image-motion ratio's
+        paths in :class:`~.motion_scale_kernels.BufferedMotionRatio`); followed when the
         model's backend changes.
         """
         backend = getattr(self.model, "backend", "numpy")
@@ -1567,7 +1573,7 @@ class AdaptiveVisualTracker:
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
                 from .law_kernels import CompiledLaw
-                from .motion_scale_kernels import BufferedMotionScale, CompiledMotionRatio
+                from .motion_scale_kernels import BufferedMotionRatio, BufferedMotionScale
                 from .prediction_kernels import BufferedFramePredictor
                 from .sample_kernels import CompiledSample, inputs_valid, supports
 
@@ -1578,7 +1584,7 @@ class AdaptiveVisualTracker:
                 if self.scale is not None:
                     self.scale = BufferedMotionScale.of(self.scale, m2)
                 if self.ratio is not None:
-                    self.ratio = CompiledMotionRatio.of(self.ratio)
+                    self.ratio = BufferedMotionRatio.of(self.ratio, m2)
                 self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
                               if supports(self) else None)
         return self._law_kernel

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..models.kernels import compiled
-from .motion_scale import MotionRatio, MotionScale
+from .motion_scale import MotionRatio, MotionScale, RATIO_RECORD_INTERVAL
 from .prediction import first_kept, TIME_EPS
 from .prediction_kernels import make_room
 
@@ -286,3 +286,144 @@ class CompiledMotionRatio(MotionRatio):
         for k in (2, 4, 7):                 # a, xa, ab: step * v, as the reference
             sums[k] *= step
         sums[6] *= step * step              # aa: (step * step) * v
+
+
+@compiled(error_model="numpy")
+def _ratio_record(times, path_a, path_b, speed_a, speed_b, start, end, t, jq, z_dot, z,
+                  x_hat, unit):
+    """MotionRatio.record into row ``end`` from the model's rate: the same arithmetic.
+
+    A = jq / z times ``unit`` (1 / the steps' product), B = -x_hat z_dot / z; the paths are
+    extended along the last speeds first.
+    """
+    times[end] = t
+    h = t - times[end - 1] if end > start else 0.0
+    for r in range(jq.shape[0]):
+        if end > start:
+            path_a[end, r] = path_a[end - 1, r] + h * speed_a[end - 1, r]
+            path_b[end, r] = path_b[end - 1, r] + h * speed_b[end - 1, r]
+        else:
+            path_a[end, r] = 0.0
+            path_b[end, r] = 0.0
+        speed_a[end, r] = (jq[r] / z[r]) * unit
+        speed_b[end, r] = -x_hat[r] * z_dot[r] / z[r]
+
+
+@compiled(error_model="numpy")
+def _ratio_paths_at(times, path_a, path_b, speed_a, speed_b, start, end, stamp, total, a, b):
+    """MotionRatio._paths_at into ``a``, ``b``; False before the first sample."""
+    i = start + np.searchsorted(times[start:end], stamp + TIME_EPS, side="right") - 1
+    if i < start:
+        return False
+    h = stamp - times[i]
+    for r in range(a.shape[0]):
+        a[r] = total * (path_a[i, r] + h * speed_a[i, r])
+        b[r] = path_b[i, r] + h * speed_b[i, r]
+    return True
+
+
+class BufferedMotionRatio(CompiledMotionRatio):
+    """:class:`CompiledMotionRatio` with its paths on arrays too, extended and read compiled.
+
+    The model's rate goes in as arrays (:meth:`record_rate`), the paths at a frame's capture
+    time come out into two reused arrays (:meth:`_paths_at`): no list is made at 1 kHz.  The
+    fit's decisions stay :meth:`.motion_scale.MotionRatio.frame`'s.  Equal to the reference
+    at every sample (test_motion_scale.py, test_compiled_law.py).
+    """
+
+    _NAMES = ("_times", "_path_a", "_path_b", "_speed_a", "_speed_b")
+
+    @classmethod
+    def of(cls, ratio, m2, capacity=512):
+        """This ratio's state (list-based or compiled) with its paths on arrays."""
+        new = cls.__new__(cls)
+        state = dict(ratio.__dict__)
+        times = state.pop("times", [])
+        lists = [state.pop(name, []) for name in ("path_a", "path_b", "speed_a", "speed_b")]
+        new.__dict__.update(state)
+        if ratio.sums is not None:
+            new.sums = np.array(ratio.sums, dtype=float)
+        new.m2 = int(m2)
+        new._allocate(max(int(capacity), 2 * len(times)))
+        n = len(times)
+        new._times[:n] = times
+        for name, values in zip(cls._NAMES[1:], lists):
+            if n:
+                getattr(new, name)[:n] = values
+        new._end = n
+        new._a, new._b = np.empty(new.m2), np.empty(new.m2)
+        new._warm_up()
+        return new
+
+    def _warm_up(self):
+        """Compile (or load) the kernels now, not at the first frame of a 1 kHz loop."""
+        one = np.ones(self.m2)
+        arrays = [np.zeros(2), *(np.zeros((2, self.m2)) for _ in range(4))]
+        _ratio_record(*arrays, 0, 0, 0.0, one, one, one, one, 1.0)
+        _ratio_paths_at(*arrays, 0, 1, 0.0, 1.0, np.empty(self.m2), np.empty(self.m2))
+        _ratio_moments(np.zeros((10, self.m2)), 0.0, one, one, one)
+
+    def _allocate(self, capacity):
+        self._times = np.empty(capacity)
+        for name in self._NAMES[1:]:
+            setattr(self, name, np.empty((capacity, self.m2)))
+        self._start = self._end = 0
+
+    def reset(self):
+        # MotionRatio.reset's lists are the arrays here
+        super().reset()
+        for name in ("times", "path_a", "path_b", "speed_a", "speed_b"):
+            del self.__dict__[name]
+        self._allocate(self._times.shape[0] if "_times" in self.__dict__ else 512)
+
+    def to_lists(self):
+        """The reference MotionRatio with this state."""
+        ref = super().to_lists()
+        for name in self._NAMES + ("m2", "_a", "_b", "_start", "_end"):
+            ref.__dict__.pop(name, None)
+        a, b = self._start, self._end
+        ref.times = self._times[a:b].tolist()
+        ref.path_a, ref.path_b = self._path_a[a:b].tolist(), self._path_b[a:b].tolist()
+        ref.speed_a, ref.speed_b = self._speed_a[a:b].tolist(), self._speed_b[a:b].tolist()
+        return ref
+
+    def due(self, t):
+        end = self._end
+        return end == self._start or t - self._times[end - 1] >= RATIO_RECORD_INTERVAL - TIME_EPS
+
+    def record(self, t, speed_a, speed_b):
+        """MotionRatio.record from speeds A and B (lists or arrays): as the reference."""
+        if not self.due(t):
+            return
+        speed_a, speed_b = np.asarray(speed_a, dtype=float), np.asarray(speed_b, dtype=float)
+        ones = np.ones(self.m2)
+        # A = (A / 1) * unit, B = -(-B) * 1 / 1: the reference's products, bit for bit
+        self._record(t, speed_a, ones, ones, -speed_b)
+
+    def record_rate(self, t, x_hat, jq, z_dot, z):
+        """Extend the paths with A = jq / z and B = -x_hat z_dot / z (the model's rate)."""
+        if self.due(t):
+            self._record(t, jq, z_dot, z, x_hat)
+
+    def _record(self, t, jq, z_dot, z, x_hat):
+        end = self._end
+        if end == self._times.shape[0]:
+            make_room(self, self._NAMES)
+            end = self._end
+        _ratio_record(self._times, self._path_a, self._path_b, self._speed_a, self._speed_b,
+                      self._start, end, t, jq, z_dot, z, x_hat, 1.0 / self.total)
+        self._end = end + 1
+        if t - self._times[self._start] > 1.5 * self.horizon:
+            self._start += first_kept(self._times[self._start:end + 1], t, self.horizon)
+
+    def _paths_at(self, stamp):
+        a, b = self._a, self._b
+        if not _ratio_paths_at(self._times, self._path_a, self._path_b, self._speed_a,
+                               self._speed_b, self._start, self._end, stamp, self.total, a, b):
+            return None
+        return a, b
+
+    def _moments(self, decay, x, a, b):
+        if self.sums is None:
+            self.sums = np.zeros((10, self.m2))
+        return _ratio_moments(self.sums, decay, np.ascontiguousarray(x, dtype=float), a, b)
