@@ -1091,7 +1091,7 @@ class AdaptiveVisualTracker:
         record_rate = getattr(self.ratio, "record_rate", None)
         if record_rate is not None:
             # (compiled: the rate's rows as they are, no list made)
-            record_rate(t, x_hat, *(np.ascontiguousarray(v, dtype=float) for v in rate))
+            record_rate(t, *(np.ascontiguousarray(v, dtype=float) for v in (x_hat, *rate)))
             return
         jq, z_dot, z = (np.asarray(v).tolist() for v in rate)
         self.ratio.record(t, [a / c for a, c in zip(jq, z)],

@@ -336,6 +336,8 @@ class BufferedMotionRatio(CompiledMotionRatio):
     @classmethod
     def of(cls, ratio, m2, capacity=512):
         """This ratio's state (list-based or compiled) with its paths on arrays."""
+        if isinstance(ratio, BufferedMotionRatio):
+            ratio = ratio.to_lists()
         new = cls.__new__(cls)
         state = dict(ratio.__dict__)
         times = state.pop("times", [])
