@@ -445,30 +445,24 @@ def test_the_ratio_fits_a_small_a_z_part_once_the_noise_is_measured():
     assert max(calm) < 0.03 and max(calm) < 0.5 * max(loose)
 
 
-@pytest.mark.parametrize("kind", ["sums", "buffered"])
-def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference(kind):
-    from visual_adaptive_servo.control.motion_scale_kernels import (BufferedMotionRatio,
-                                                                    CompiledMotionRatio)
-
-    def compiled(ratio):
-        # the buffered one from 8 rows: make_room moves and doubles its arrays on the way
-        return (CompiledMotionRatio.of(ratio) if kind == "sums"
-                else BufferedMotionRatio.of(ratio, 4, capacity=8))
+def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference():
+    from visual_adaptive_servo.control.motion_scale_kernels import BufferedMotionRatio
 
     for other, k1 in ((1.0, 1.0), (0.0, 2.5)):
         ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0)
-        fast = compiled(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0))
+        # from 8 rows: make_room moves and doubles its arrays on the way
+        fast = BufferedMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5,
+                                                  0.5, 3.0), 4, capacity=8)
         a = feed_ratio(ref, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         b = feed_ratio(fast, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)
         np.testing.assert_allclose(b, a, rtol=1e-12)
         assert fast.total == pytest.approx(ref.total, rel=1e-12)
         assert fast.shown == pytest.approx(ref.shown, rel=1e-9, abs=1e-12)
         assert fast.spread == pytest.approx(ref.spread, rel=1e-9)
-        if kind == "buffered":
-            # the same paths, trimmed alike (0.5 s horizon): back on lists, equal to the digit
-            back = fast.to_lists()
-            assert back.times == ref.times and back.path_a == ref.path_a
-            assert back.speed_b == ref.speed_b and back.sums == ref.sums
+        # the same paths, trimmed alike (0.5 s horizon): back on lists, equal to the digit
+        back = fast.to_lists()
+        assert back.times == ref.times and back.path_a == ref.path_a
+        assert back.speed_b == ref.speed_b and back.sums == ref.sums
 
 
 def test_the_buffered_ratio_takes_the_models_rate_as_the_tracker_gives_it():

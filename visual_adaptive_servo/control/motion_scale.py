@@ -418,7 +418,7 @@ class MotionRatio:
         """Fold the frame x and the paths a, b at its time into the weighted sums.
 
         Returns the centred (co)variances pooled over the coordinates: c_aa, c_bb, c_ab,
-        c_xa, c_xb, c_xx.  (Compiled in :class:`.motion_scale_kernels.CompiledMotionRatio`.)
+        c_xa, c_xb, c_xx.  (Compiled in :class:`.motion_scale_kernels.BufferedMotionRatio`.)
         """
         x = np.asarray(x, dtype=float).tolist()
         sums = self.sums if self.sums is not None else [[0.0] * len(x) for _ in range(10)]

@@ -19,8 +19,10 @@ and stays the readable reference; :class:`BufferedMotionScale` is the same
 scale with the path in preallocated arrays (a start and an end index, the same
 trim rule) and a frame's regression in one kernel (:func:`_frame`), with the
 same arithmetic in the same order (numpy's pairwise sum where the reference
-calls np.sum).  The tracker runs it with the compiled backend (test:
-test_compiled_law.py).  Importing this module imports numba.
+calls np.sum); :class:`BufferedMotionRatio` does the same for
+:class:`.motion_scale.MotionRatio`'s two paths and weighted sums.  The tracker runs
+both with the compiled backend (test: test_compiled_law.py).  Importing this module
+imports numba.
 """
 
 from __future__ import annotations
@@ -246,48 +248,6 @@ def _ratio_moments(sums, decay, x, a, b):
     return c_aa, c_bb, c_ab, c_xa, c_xb, c_xx
 
 
-class CompiledMotionRatio(MotionRatio):
-    """:class:`.motion_scale.MotionRatio` with its weighted sums on an array, folded compiled.
-
-    The paths stay lists (a few entries a sample); a fitted frame's sums and moments, most
-    of its cost, run in :func:`_ratio_moments`.  Equal to the reference at every sample of
-    closed-loop runs (test_compiled_law.py).
-    """
-
-    @classmethod
-    def of(cls, ratio):
-        """This ratio's state in a CompiledMotionRatio (the sums as an array)."""
-        new = cls.__new__(cls)
-        new.__dict__.update(ratio.__dict__)
-        if ratio.sums is not None:
-            new.sums = np.array(ratio.sums, dtype=float)
-        # compile (or load) the kernel now, not at the first frame of a 1 kHz loop
-        one = np.ones(2)
-        _ratio_moments(np.zeros((10, 2)), 0.0, one, one, one)
-        return new
-
-    def to_lists(self):
-        """The reference MotionRatio with this state."""
-        ref = MotionRatio.__new__(MotionRatio)
-        ref.__dict__.update(self.__dict__)
-        if self.sums is not None:
-            ref.sums = self.sums.tolist()
-        return ref
-
-    def _moments(self, decay, x, a, b):
-        if self.sums is None:
-            self.sums = np.zeros((10, len(a)))
-        return _ratio_moments(self.sums, decay, np.asarray(x, dtype=float),
-                              np.array(a, dtype=float), np.array(b, dtype=float))
-
-    def rescale(self, step):
-        self.total *= step
-        sums = self.sums
-        for k in (2, 4, 7):                 # a, xa, ab: step * v, as the reference
-            sums[k] *= step
-        sums[6] *= step * step              # aa: (step * step) * v
-
-
 @compiled(error_model="numpy")
 def _ratio_record(times, path_a, path_b, speed_a, speed_b, start, end, t, jq, z_dot, z,
                   x_hat, unit):
@@ -322,20 +282,21 @@ def _ratio_paths_at(times, path_a, path_b, speed_a, speed_b, start, end, stamp, 
     return True
 
 
-class BufferedMotionRatio(CompiledMotionRatio):
-    """:class:`CompiledMotionRatio` with its paths on arrays too, extended and read compiled.
+class BufferedMotionRatio(MotionRatio):
+    """:class:`.motion_scale.MotionRatio` with its paths and sums on arrays, run compiled.
 
     The model's rate goes in as arrays (:meth:`record_rate`), the paths at a frame's capture
-    time come out into two reused arrays (:meth:`_paths_at`): no list is made at 1 kHz.  The
-    fit's decisions stay :meth:`.motion_scale.MotionRatio.frame`'s.  Equal to the reference
-    at every sample (test_motion_scale.py, test_compiled_law.py).
+    time come out into two reused arrays (:meth:`_paths_at`), and a fitted frame's sums and
+    moments, most of its cost, are folded in :func:`_ratio_moments`: no list is made at
+    1 kHz.  The fit's decisions stay :meth:`.motion_scale.MotionRatio.frame`'s.  Equal to
+    the reference at every sample (test_motion_scale.py, test_compiled_law.py).
     """
 
     _NAMES = ("_times", "_path_a", "_path_b", "_speed_a", "_speed_b")
 
     @classmethod
     def of(cls, ratio, m2, capacity=512):
-        """This ratio's state (list-based or compiled) with its paths on arrays."""
+        """This ratio's state (a list-based or a buffered one) on arrays."""
         if isinstance(ratio, BufferedMotionRatio):
             ratio = ratio.to_lists()
         new = cls.__new__(cls)
@@ -380,9 +341,12 @@ class BufferedMotionRatio(CompiledMotionRatio):
 
     def to_lists(self):
         """The reference MotionRatio with this state."""
-        ref = super().to_lists()
+        ref = MotionRatio.__new__(MotionRatio)
+        ref.__dict__.update(self.__dict__)
         for name in self._NAMES + ("m2", "_a", "_b", "_start", "_end"):
-            ref.__dict__.pop(name, None)
+            del ref.__dict__[name]
+        if self.sums is not None:
+            ref.sums = self.sums.tolist()
         a, b = self._start, self._end
         ref.times = self._times[a:b].tolist()
         ref.path_a, ref.path_b = self._path_a[a:b].tolist(), self._path_b[a:b].tolist()
@@ -429,3 +393,10 @@ class BufferedMotionRatio(CompiledMotionRatio):
         if self.sums is None:
             self.sums = np.zeros((10, self.m2))
         return _ratio_moments(self.sums, decay, np.ascontiguousarray(x, dtype=float), a, b)
+
+    def rescale(self, step):
+        self.total *= step
+        sums = self.sums
+        for k in (2, 4, 7):                 # a, xa, ab: step * v, as the reference
+            sums[k] *= step
+        sums[6] *= step * step              # aa: (step * step) * v
