@@ -33,8 +33,8 @@ import numpy as np
 
 from ..models.kernels import compiled
 from .motion_scale import MotionRatio, MotionScale, RATIO_RECORD_INTERVAL
-from .prediction import first_kept, TIME_EPS
-from .prediction_kernels import make_room
+from .prediction import TIME_EPS
+from .prediction_kernels import SampleRows
 
 
 @compiled(inline="always")
@@ -116,8 +116,10 @@ def _record(times, path, speed, start, end, t, v):
         speed[end, j] = v[j]
 
 
-class BufferedMotionScale(MotionScale):
+class BufferedMotionScale(MotionScale, SampleRows):
     """:class:`.motion_scale.MotionScale` with its path on arrays and its regression compiled."""
+
+    _ROWS = ("_times", "_path", "_speed")
 
     def __init__(self, window, rate, lower, upper, min_motion, horizon, m2, capacity=512,
                  initial=1.0, start_factor=1.0):
@@ -156,7 +158,7 @@ class BufferedMotionScale(MotionScale):
         if n:
             new._path[:n] = scale.path
             new._speed[:n] = scale.speed
-        new._end = n
+        new._loaded(n)
         new.value, new.target, new.weight, new.t_frame = (scale.value, scale.target,
                                                           scale.weight, scale.t_frame)
         new.factor, new.trusted = scale.factor, scale.trusted
@@ -178,15 +180,10 @@ class BufferedMotionScale(MotionScale):
         return other
 
     def record(self, t, speed):
-        end = self._end
-        if end == self._times.shape[0]:
-            self._make_room()
-            end = self._end
+        end = self.next_row()
         _record(self._times, self._path, self._speed, self._start, end, t,
                 np.ascontiguousarray(speed, dtype=float))
-        self._end = end + 1
-        if t - self._times[self._start] > 1.5 * self.horizon:
-            self._start += first_kept(self._times[self._start:end + 1], t, self.horizon)
+        self._keep_row(t)
 
     def path_at(self, stamp):
         a, b = self._start, self._end
@@ -215,9 +212,6 @@ class BufferedMotionScale(MotionScale):
             return None
         self.target, self.trusted = target, True
         return target
-
-    def _make_room(self):
-        make_room(self, ("_times", "_path", "_speed"))
 
 
 @compiled(error_model="numpy")
@@ -282,7 +276,7 @@ def _ratio_paths_at(times, path_a, path_b, speed_a, speed_b, start, end, stamp, 
     return True
 
 
-class BufferedMotionRatio(MotionRatio):
+class BufferedMotionRatio(MotionRatio, SampleRows):
     """:class:`.motion_scale.MotionRatio` with its paths and sums on arrays, run compiled.
 
     The model's rate goes in as arrays (:meth:`record_rate`), the paths at a frame's capture
@@ -292,7 +286,7 @@ class BufferedMotionRatio(MotionRatio):
     the reference at every sample (test_motion_scale.py, test_compiled_law.py).
     """
 
-    _NAMES = ("_times", "_path_a", "_path_b", "_speed_a", "_speed_b")
+    _ROWS = ("_times", "_path_a", "_path_b", "_speed_a", "_speed_b")
 
     @classmethod
     def of(cls, ratio, m2, capacity=512):
@@ -310,10 +304,10 @@ class BufferedMotionRatio(MotionRatio):
         new._allocate(max(int(capacity), 2 * len(times)))
         n = len(times)
         new._times[:n] = times
-        for name, values in zip(cls._NAMES[1:], lists):
+        for name, values in zip(cls._ROWS[1:], lists):
             if n:
                 getattr(new, name)[:n] = values
-        new._end = n
+        new._loaded(n)
         new._a, new._b = np.empty(new.m2), np.empty(new.m2)
         new._warm_up()
         return new
@@ -328,7 +322,7 @@ class BufferedMotionRatio(MotionRatio):
 
     def _allocate(self, capacity):
         self._times = np.empty(capacity)
-        for name in self._NAMES[1:]:
+        for name in self._ROWS[1:]:
             setattr(self, name, np.empty((capacity, self.m2)))
         self._start = self._end = 0
 
@@ -343,8 +337,9 @@ class BufferedMotionRatio(MotionRatio):
         """The reference MotionRatio with this state."""
         ref = MotionRatio.__new__(MotionRatio)
         ref.__dict__.update(self.__dict__)
-        for name in self._NAMES + ("m2", "_a", "_b", "_start", "_end"):
+        for name in self._ROWS + ("m2", "_a", "_b", "_start", "_end"):
             del ref.__dict__[name]
+        ref.__dict__.pop("_t_first", None)
         if self.sums is not None:
             ref.sums = self.sums.tolist()
         a, b = self._start, self._end
@@ -372,15 +367,10 @@ class BufferedMotionRatio(MotionRatio):
             self._record(t, jq, z_dot, z, x_hat)
 
     def _record(self, t, jq, z_dot, z, x_hat):
-        end = self._end
-        if end == self._times.shape[0]:
-            make_room(self, self._NAMES)
-            end = self._end
+        end = self.next_row()
         _ratio_record(self._times, self._path_a, self._path_b, self._speed_a, self._speed_b,
                       self._start, end, t, jq, z_dot, z, x_hat, 1.0 / self.total)
-        self._end = end + 1
-        if t - self._times[self._start] > 1.5 * self.horizon:
-            self._start += first_kept(self._times[self._start:end + 1], t, self.horizon)
+        self._keep_row(t)
 
     def _paths_at(self, stamp):
         a, b = self._a, self._b

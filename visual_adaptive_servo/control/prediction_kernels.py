@@ -100,7 +100,59 @@ def _correct_late(times, rates, history, has, i, end, stamp, x_frame, t, gain, d
     out[:] = steps[k - 1]
 
 
-class BufferedFramePredictor(FramePredictor):
+class SampleRows:
+    """Samples in rows ``_start`` to ``_end`` of preallocated arrays, trimmed as the lists are.
+
+    The bookkeeping :class:`BufferedFramePredictor` and the image-motion scale's and ratio's
+    buffers (:mod:`.motion_scale_kernels`) share.  A subclass names its arrays in ``_ROWS``
+    (``_times`` first), makes them in ``_allocate(capacity)`` (with ``_start = _end = 0``)
+    and has ``horizon``.  A sample is written in the row :meth:`next_row` gives and kept by
+    :meth:`_keep_row`, which drops the samples older than ``horizon`` once the oldest is
+    1.5 ``horizon`` old: :func:`.prediction.trim_buffers`' rule for the list-based
+    references, so both keep the same samples.
+    """
+
+    _ROWS = ("_times",)
+
+    def next_row(self):
+        """The row the next sample goes in (the arrays compacted or grown first if full)."""
+        if self._end == self._times.shape[0]:
+            make_room(self, self._ROWS)
+        return self._end
+
+    def _keep_row(self, t):
+        """Keep the sample at time t written in :meth:`next_row`'s row; trim the oldest."""
+        start = self._start
+        end = self._end = self._end + 1
+        if end - start == 1:
+            self._t_first = t            # times[_start] as a float: read at every sample
+        if t - self._t_first > 1.5 * self.horizon:
+            start = self._start = start + first_kept(self._times[start:end], t, self.horizon)
+            self._t_first = float(self._times[start])
+
+    def _loaded(self, n):
+        """Rows 0 to n were filled at once (from a list-based buffer): keep them."""
+        self._start, self._end = 0, n
+        self._t_first = float(self._times[0]) if n else 0.0
+
+
+def make_room(buffer, names):
+    """Move a buffer's live samples to the front of its arrays, or double them when full.
+
+    ``buffer`` keeps its samples in the arrays named ``names`` (rows ``_start`` to
+    ``_end``) and makes them with ``_allocate(capacity)``.
+    """
+    a, b = buffer._start, buffer._end
+    live = b - a
+    arrays = [getattr(buffer, name) for name in names]
+    if live > arrays[0].shape[0] // 2:
+        buffer._allocate(2 * arrays[0].shape[0])
+    for name, array in zip(names, arrays):
+        getattr(buffer, name)[:live] = array[a:b]
+    buffer._start, buffer._end = 0, live
+
+
+class BufferedFramePredictor(FramePredictor, SampleRows):
     """:class:`.prediction.FramePredictor` on preallocated arrays, its steps compiled.
 
     The same predictor (the list-based class stays the reference; equal at every
@@ -112,6 +164,8 @@ class BufferedFramePredictor(FramePredictor):
     runs it with the compiled backend.
     """
 
+    _ROWS = ("_times", "_rates", "_history", "_has")
+
     def __init__(self, horizon, gain, drift_gain, m2, capacity=512):
         # FramePredictor.__init__ is not called: the arrays below are its buffer
         self.horizon = float(horizon)
@@ -120,8 +174,6 @@ class BufferedFramePredictor(FramePredictor):
         self.drift = 0.0
         self.last_stamp = None
         self.m2 = int(m2)
-        self._keep = 1.5 * self.horizon    # trimmed once the oldest sample is this old
-        self._t_first = 0.0                # the oldest sample's time (stored)
         self._zeros = np.zeros(self.m2)     # b before any drift is learnt
         self._allocate(int(capacity))
         self._warm_up()
@@ -251,12 +303,6 @@ class BufferedFramePredictor(FramePredictor):
             self._has[end] = True
         self.stored(t, applied_stamp)
 
-    def next_row(self):
-        """The row the next sample goes in (the buffer compacted or grown first if full)."""
-        if self._end == self._times.shape[0]:
-            self._make_room()
-        return self._end
-
     def store(self):
         """(times, rates flat, history, has, row): where the compiled sample stores a sample.
 
@@ -268,30 +314,6 @@ class BufferedFramePredictor(FramePredictor):
 
     def stored(self, t, applied_stamp=None):
         """End the commit of the sample at ``t`` written in :meth:`next_row`: keep it, trim."""
-        end = self._end = self._end + 1
+        self._keep_row(t)
         if applied_stamp is not None:
             self.last_stamp = applied_stamp
-        if end - self._start == 1:
-            self._t_first = t            # times[_start] as a float: read at every sample
-        if t - self._t_first > self._keep:
-            self._start += first_kept(self._times[self._start:end], t, self.horizon)
-            self._t_first = float(self._times[self._start])
-
-    def _make_room(self):
-        make_room(self, ("_times", "_rates", "_history", "_has"))
-
-
-def make_room(buffer, names):
-    """Move a buffer's live samples to the front of its arrays, or double them when full.
-
-    ``buffer`` keeps its samples in the arrays named ``names`` (rows ``_start`` to
-    ``_end``) and makes them with ``_allocate(capacity)``.
-    """
-    a, b = buffer._start, buffer._end
-    live = b - a
-    arrays = [getattr(buffer, name) for name in names]
-    if live > arrays[0].shape[0] // 2:
-        buffer._allocate(2 * arrays[0].shape[0])
-    for name, array in zip(names, arrays):
-        getattr(buffer, name)[:live] = array[a:b]
-    buffer._start, buffer._end = 0, live
