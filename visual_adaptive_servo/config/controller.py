@@ -259,8 +259,9 @@ CONTROLLER_PARAMS = (
     ParamSpec("motion_scale.window", 1.0, "float",
               "Time constant of the frames' weighting in the scale's regression [s].",
               0.01, 60.0),
-    ParamSpec("motion_scale.rate", 1.0, "float",
-              "How fast s follows the regression [1/s].", 1e-3, 100.0),
+    ParamSpec("motion_scale.rate", 3.0, "float",
+              "How fast s follows the regression, and phi of the slow start decays, once it "
+              "is trusted [1/s] (docs/robust_adaptation.md).", 1e-3, 100.0),
     ParamSpec("motion_scale.lower", 0.2, "float", "Lower bound of s.", 1e-3, 1.0),
     ParamSpec("motion_scale.upper", 5.0, "float", "Upper bound of s.", 1.0, 1e3),
     ParamSpec("motion_scale.initial", 1.0, "float",
