@@ -141,24 +141,13 @@ class BufferedMotionScale(MotionScale, SampleRows):
         self._reset_fit()
         self._allocate(self._capacity)
 
-    def _allocate(self, capacity):
-        self._times = np.empty(capacity)
-        self._path = np.empty((capacity, self.m2))
-        self._speed = np.empty((capacity, self.m2))
-        self._start = self._end = 0
-
     @classmethod
     def of(cls, scale, m2):
         """The buffered scale with the state of a list-based one."""
         new = cls(scale.window, scale.rate, scale.lower, scale.upper, scale.min_motion,
                   scale.horizon, m2, max(512, 2 * len(scale.times)), scale.initial,
                   scale.start_factor)
-        n = len(scale.times)
-        new._times[:n] = scale.times
-        if n:
-            new._path[:n] = scale.path
-            new._speed[:n] = scale.speed
-        new._loaded(n)
+        new._load(scale.times, scale.path, scale.speed)
         new.value, new.target, new.weight, new.t_frame = (scale.value, scale.target,
                                                           scale.weight, scale.t_frame)
         new.factor, new.trusted = scale.factor, scale.trusted
@@ -302,12 +291,7 @@ class BufferedMotionRatio(MotionRatio, SampleRows):
             new.sums = np.array(ratio.sums, dtype=float)
         new.m2 = int(m2)
         new._allocate(max(int(capacity), 2 * len(times)))
-        n = len(times)
-        new._times[:n] = times
-        for name, values in zip(cls._ROWS[1:], lists):
-            if n:
-                getattr(new, name)[:n] = values
-        new._loaded(n)
+        new._load(times, *lists)
         new._a, new._b = np.empty(new.m2), np.empty(new.m2)
         new._warm_up()
         return new
@@ -319,12 +303,6 @@ class BufferedMotionRatio(MotionRatio, SampleRows):
         _ratio_record(*arrays, 0, 0, 0.0, one, one, one, one, 1.0)
         _ratio_paths_at(*arrays, 0, 1, 0.0, 1.0, np.empty(self.m2), np.empty(self.m2))
         _ratio_moments(np.zeros((10, self.m2)), 0.0, one, one, one)
-
-    def _allocate(self, capacity):
-        self._times = np.empty(capacity)
-        for name in self._ROWS[1:]:
-            setattr(self, name, np.empty((capacity, self.m2)))
-        self._start = self._end = 0
 
     def reset(self):
         # MotionRatio.reset's lists are the arrays here

@@ -105,14 +105,22 @@ class SampleRows:
 
     The bookkeeping :class:`BufferedFramePredictor` and the image-motion scale's and ratio's
     buffers (:mod:`.motion_scale_kernels`) share.  A subclass names its arrays in ``_ROWS``
-    (``_times`` first), makes them in ``_allocate(capacity)`` (with ``_start = _end = 0``)
-    and has ``horizon``.  A sample is written in the row :meth:`next_row` gives and kept by
-    :meth:`_keep_row`, which drops the samples older than ``horizon`` once the oldest is
-    1.5 ``horizon`` old: :func:`.prediction.trim_buffers`' rule for the list-based
-    references, so both keep the same samples.
+    (``_times`` first) and has ``horizon`` and ``m2``; ``_allocate(capacity)`` makes the
+    arrays empty, by default ``_times`` (capacity,) and the others (capacity, m2).  A sample
+    is written in the row :meth:`next_row` gives and kept by :meth:`_keep_row`, which drops
+    the samples older than ``horizon`` once the oldest is 1.5 ``horizon`` old:
+    :func:`.prediction.trim_buffers`' rule for the list-based references, so both keep the
+    same samples.  :meth:`_load` fills them from a list-based buffer at once.
     """
 
     _ROWS = ("_times",)
+
+    def _allocate(self, capacity):
+        """Empty arrays of ``capacity`` rows: ``_times`` (capacity,), the others (capacity, m2)."""
+        self._times = np.empty(capacity)
+        for name in self._ROWS[1:]:
+            setattr(self, name, np.empty((capacity, self.m2)))
+        self._start = self._end = 0
 
     def next_row(self):
         """The row the next sample goes in (the arrays compacted or grown first if full)."""
@@ -130,8 +138,13 @@ class SampleRows:
             start = self._start = start + first_kept(self._times[start:end], t, self.horizon)
             self._t_first = float(self._times[start])
 
-    def _loaded(self, n):
-        """Rows 0 to n were filled at once (from a list-based buffer): keep them."""
+    def _load(self, times, *columns):
+        """Fill rows 0 to n at once from a list-based buffer's times and columns; keep them."""
+        n = len(times)
+        self._times[:n] = times
+        if n:
+            for name, values in zip(self._ROWS[1:], columns):
+                getattr(self, name)[:n] = values
         self._start, self._end = 0, n
         self._t_first = float(self._times[0]) if n else 0.0
 
