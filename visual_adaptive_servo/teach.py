@@ -23,7 +23,11 @@ camera of a parameter file.  The joint path starts at rest at
     q_j(t) = q0_j + a_j sin^2(pi k_j t / T)
 
 (amplitudes a_j, whole numbers of cycles k_j), so the recorded table is a
-periodic, C2 trajectory that starts exactly where the arm starts.  The output is
+periodic, C2 trajectory that starts exactly where the arm starts.  Joint j
+sweeps [q0_j, q0_j + a_j] (a negative amplitude moves it the other way), which
+must lie within the URDF's ``<limit lower upper>``: a path past a limit is
+refused, naming the joint, with amplitudes that fit (a real arm stops at its end
+stop, and PyBullet stops the simulated one there too).  The output is
 the CSV read by ``trajectory.type: table`` (t, u1, v1, ..., um, vm) and a PNG of
 the taught image paths.
 """
@@ -49,10 +53,46 @@ def joint_path(q0, amplitudes, cycles, period):
     return q
 
 
+def check_joint_limits(chain, q0, amplitudes):
+    """Raise ValueError when the taught path takes a joint past its URDF position limits.
+
+    Joint j sweeps [q0_j, q0_j + a_j] (the sin^2 reaches 1 in every cycle).  The message
+    names each joint that leaves its range and ends with an ``--amplitude`` list that
+    fits: the same size in the direction that has room, else 90 % of the larger room.
+    """
+    q0 = np.asarray(q0, dtype=float)
+    problems, fitting = [], []
+    for joint, start, a in zip(chain.joints, q0.tolist(), np.asarray(amplitudes).tolist()):
+        unit = "m" if joint.prismatic else "rad"
+        if not joint.lower <= start <= joint.upper:
+            raise ValueError(f"joint {joint.name!r} starts at {start:g} {unit}, outside its URDF "
+                             f"limits [{joint.lower:g}, {joint.upper:g}] {unit} "
+                             f"(sim_node.initial_positions)")
+        end = start + a
+        room_up, room_down = joint.upper - start, start - joint.lower
+        if joint.lower <= end <= joint.upper:
+            fitting.append(a)
+            continue
+        side, limit = ("upper", joint.upper) if end > joint.upper else ("lower", joint.lower)
+        problems.append(f"joint {joint.name!r} from {start:g} to {end:g} {unit}, past its URDF "
+                        f"{side} limit {limit:g} {unit} (room: {room_up:.4g} {unit} up, "
+                        f"{room_down:.4g} {unit} down)")
+        if a > 0.0:
+            fitting.append(-a if room_down >= a else
+                           0.9 * (room_up if room_up >= room_down else -room_down))
+        else:
+            fitting.append(-a if room_up >= -a else
+                           0.9 * (-room_down if room_down >= room_up else room_up))
+    if problems:
+        raise ValueError("the taught path moves " + "; ".join(problems) + ". Amplitudes that "
+                         "fit: --amplitude " + ",".join(f"{a:.4g}" for a in fitting))
+
+
 def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0):
     """Move the simulated arm along the taught path; return (t (N,), pixels (N, 2m)).
 
-    Raises ValueError when a point leaves the picture or goes behind the camera.
+    Raises ValueError when a joint would pass its URDF position limits
+    (:func:`check_joint_limits`) or a point leaves the picture or goes behind the camera.
     """
     from sim_bridge.plant import ArmPlant
     from .models import GRAVITY
@@ -66,6 +106,7 @@ def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0):
         raise ValueError(f"cycles: whole numbers >= 1 per joint, got {list(cycles)}")
     if not duration > 0.0 or not rate > 0.0:
         raise ValueError(f"duration and rate must be > 0, got {duration} and {rate}")
+    check_joint_limits(arm.chain, sim_config.initial_positions, amplitudes)
     path = joint_path(sim_config.initial_positions, amplitudes, cycles, duration)
     times = np.linspace(0.0, duration, int(round(duration * rate)) + 1)
     camera = sim_config.camera
@@ -150,7 +191,9 @@ def add_parser(subparsers, floats):
     p.add_argument("--duration", type=float, default=20.0,
                    help="period of the taught path [s] (the table repeats with it)")
     p.add_argument("--amplitude", type=floats, default=[0.25], metavar="A[,A...]",
-                   help="joint amplitudes [rad or m]: one for all joints or one per joint")
+                   help="joint amplitudes [rad or m]: one for all joints or one per joint; "
+                   "joint j moves from its initial position to that plus its amplitude (a "
+                   "negative one moves it the other way), within its URDF limits")
     p.add_argument("--cycles", type=floats, default=None, metavar="K[,K...]",
                    help="whole cycles per period, per joint (default 1, 2, 1, 2, ...)")
     p.add_argument("--rate", type=float, default=100.0, help="samples per second in the table")
