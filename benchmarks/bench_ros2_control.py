@@ -19,6 +19,8 @@
     ros2 launch visual_adaptive_servo ros2_control.launch.py record:=true bag_dir:=/tmp/rc ...
     python benchmarks/bench_ros2_control.py /tmp/direct /tmp/rc [--period 0.005]
 
+(--period: the control period; by default the joint states' own, read from their stamps.)
+
 Per bag (read with rosbags, no ROS needed):
 
 * tracking: RMS and max over t >= 5 s (null for a shorter run) and over the last 5 s of
@@ -76,10 +78,33 @@ def _percentiles(values, scale=1.0):
             "p99": float(np.percentile(v, 99)), "max": float(v.max())}
 
 
-def analyse(bag, period):
-    topics = _read(bag)
+def state_period(states):
+    """The simulator's control period [s]: the median interval between its joint states."""
+    stamps = np.array([_stamp_ns(msg) for _, msg in states], dtype=np.int64)
+    steps = np.diff(stamps)
+    steps = steps[steps > 0]
+    return float(np.median(steps)) * 1e-9 if steps.size else None
+
+
+def analyse(bag, period=None):
+    """The figures of one recorded run; ``period`` None: the joint states' own period."""
+    return analyse_topics(_read(bag), period, bag)
+
+
+def analyse_topics(topics, period=None, bag=None):
+    """:func:`analyse` on the messages of a bag, ``{topic: [(log_ns, msg), ...]}``.
+
+    A period that is not the joint states' own (a 1 kHz run read with a 5 ms period) would
+    count no period as commanded: the one used is reported, with the joint states' own
+    beside it when they differ.
+    """
     through_ros2_control = "/sim_node/joint_states" in topics
     sim_states = topics["/sim_node/joint_states" if through_ros2_control else "/joint_states"]
+    own = state_period(sim_states)
+    if period is None:
+        if own is None:
+            raise ValueError(f"{bag}: fewer than two joint states, no control period to read")
+        period = own
     answered = {}           # torque bytes -> stamps of the joint states it answers (ascending)
     for _, msg in topics["/controller_node/effort_command"]:
         answered.setdefault(np.asarray(msg.effort, float).tobytes(), []).append(_stamp_ns(msg))
@@ -139,6 +164,7 @@ def analyse(bag, period):
             for _, m in topics["/controller_node/effort_command"]]
     return {
         "bag": bag, "through_ros2_control": through_ros2_control,
+        "period_s": period, "joint_state_period_s": own,
         # a run shorter than the transient has nothing after it: null, not a crash
         "tracking_px": {"rms_after_5s": (float(np.sqrt(np.mean(err[late] ** 2)))
                                          if late.any() else None),
@@ -156,7 +182,9 @@ def analyse(bag, period):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("bags", nargs="+", help="rosbag2 folders (MCAP)")
-    parser.add_argument("--period", type=float, default=0.005, help="control period [s]")
+    parser.add_argument("--period", type=float, default=None,
+                        help="control period [s] (default: the joint states' own, read from "
+                             "their stamps)")
     args = parser.parse_args()
     result = {"environment": environment(),
               "runs": [analyse(bag, args.period) for bag in args.bags]}
