@@ -17,7 +17,7 @@
     ros2 launch visual_adaptive_servo servo.launch.py timing_mode:=realtime record:=true \
         bag_dir:=/tmp/direct params_file:=...
     ros2 launch visual_adaptive_servo ros2_control.launch.py record:=true bag_dir:=/tmp/rc ...
-    python benchmarks/bench_ros2_control.py /tmp/direct /tmp/rc [--period 0.005]
+    python benchmarks/bench_ros2_control.py /tmp/direct /tmp/rc [--period SECONDS]
 
 (--period: the control period; by default the joint states' own, read from their stamps.)
 
@@ -95,8 +95,7 @@ def analyse_topics(topics, period=None, bag=None):
     """:func:`analyse` on the messages of a bag, ``{topic: [(log_ns, msg), ...]}``.
 
     A period that is not the joint states' own (a 1 kHz run read with a 5 ms period) would
-    count no period as commanded: the one used is reported, with the joint states' own
-    beside it when they differ.
+    count no period as commanded: the one used is reported beside the joint states' own.
     """
     through_ros2_control = "/sim_node/joint_states" in topics
     sim_states = topics["/sim_node/joint_states" if through_ros2_control else "/joint_states"]
