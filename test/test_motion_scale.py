@@ -450,7 +450,7 @@ def test_the_compiled_ratio_tests_evidence_and_significance_as_the_reference():
 
     for other, k1 in ((1.0, 1.0), (0.0, 2.5)):
         ref = MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5, 0.5, 3.0)
-        # from 8 rows: make_room moves and doubles its arrays on the way
+        # from 8 rows: _make_room moves and doubles its arrays on the way
         fast = BufferedMotionRatio.of(MotionRatio(1.0, 1.0, 0.2, 5.0, 1.0, 0.5, 0.02, 1.5,
                                                   0.5, 3.0), 4, capacity=8)
         a = feed_ratio(ref, k1, 1.0, duration=4.0, noise=0.5, other=other, told=True)

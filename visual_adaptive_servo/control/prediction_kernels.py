@@ -125,8 +125,19 @@ class SampleRows:
     def next_row(self):
         """The row the next sample goes in (the arrays compacted or grown first if full)."""
         if self._end == self._times.shape[0]:
-            make_room(self, self._ROWS)
+            self._make_room()
         return self._end
+
+    def _make_room(self):
+        """Move the live samples to the front of the arrays, or double them when full."""
+        a, b = self._start, self._end
+        live = b - a
+        arrays = [getattr(self, name) for name in self._ROWS]
+        if live > arrays[0].shape[0] // 2:
+            self._allocate(2 * arrays[0].shape[0])
+        for name, array in zip(self._ROWS, arrays):
+            getattr(self, name)[:live] = array[a:b]
+        self._start, self._end = 0, live
 
     def _keep_row(self, t):
         """Keep the sample at time t written in :meth:`next_row`'s row; trim the oldest."""
@@ -147,22 +158,6 @@ class SampleRows:
                 getattr(self, name)[:n] = values
         self._start, self._end = 0, n
         self._t_first = float(self._times[0]) if n else 0.0
-
-
-def make_room(buffer, names):
-    """Move a buffer's live samples to the front of its arrays, or double them when full.
-
-    ``buffer`` keeps its samples in the arrays named ``names`` (rows ``_start`` to
-    ``_end``) and makes them with ``_allocate(capacity)``.
-    """
-    a, b = buffer._start, buffer._end
-    live = b - a
-    arrays = [getattr(buffer, name) for name in names]
-    if live > arrays[0].shape[0] // 2:
-        buffer._allocate(2 * arrays[0].shape[0])
-    for name, array in zip(names, arrays):
-        getattr(buffer, name)[:live] = array[a:b]
-    buffer._start, buffer._end = 0, live
 
 
 class BufferedFramePredictor(FramePredictor, SampleRows):
