@@ -219,9 +219,36 @@ def test_runtime_gain_is_applied_and_invalid_changes_are_refused(context):
     ({"Gamma_z": [0.1, 0.2]}, r"controller_node\.Gamma_z: needs 3 values, got 2"),
 ])
 def test_invalid_configuration_is_refused_at_start_up(context, overrides, match):
+    core = logging.getLogger("visual_adaptive_servo")
+    level, handlers = core.level, list(core.handlers)
     with pytest.raises(ConfigError, match=match):
         ControllerNode(context=context, parameter_overrides=[
             Parameter(name, value=value) for name, value in overrides.items()])
+    # the node that failed leaves the core's logging as it found it
+    assert core.level == level and core.handlers == handlers
+
+
+def test_the_core_s_lines_while_the_model_is_built_reach_the_node_s_log(context, capfd,
+                                                                        monkeypatch):
+    # a first start compiles the kernels for half a minute while the model and the tracker
+    # are built (models/backend.py compile_notice): the node forwards the core's lines
+    # from before that, not only once it is up
+    from visual_adaptive_servo.ros import controller_node
+
+    build = controller_node.build_controller_model
+    module = logging.getLogger("visual_adaptive_servo.test_build")
+    propagates, module.propagate = module.propagate, True   # as in the test below
+
+    def logging_build(values):
+        module.info("building the model now")
+        return build(values)
+
+    monkeypatch.setattr(controller_node, "build_controller_model", logging_build)
+    try:
+        ControllerNode(context=context).destroy_node()
+    finally:
+        module.propagate = propagates
+    assert "building the model now" in capfd.readouterr().err
 
 
 def test_a_scalar_gain_and_a_gain_left_out_are_accepted(context):

@@ -34,6 +34,7 @@ from .campaigns.compare import add_parser as add_compare_parser
 from .campaigns.tune import add_parser as add_tune_parser
 from .config.scenario import load_scenario
 from .control.registry import CONTROLLER_NAMES, controller_factory
+from .models.backend import NOTICE_LOGGER
 from .schema import ConfigError
 from .teach import add_parser as add_teach_parser
 
@@ -154,6 +155,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR,
                         format="%(levelname)s %(name)s: %(message)s")
+    # a first start compiles for half a minute: say so, -v or not (models/backend.py)
+    logging.getLogger(NOTICE_LOGGER).setLevel(logging.INFO)
     try:
         return args.func(args)
     except ConfigError as exc:

@@ -36,6 +36,7 @@ from math import isfinite, log as ln, sqrt
 
 import numpy as np
 
+from ..models.backend import compile_notice
 from ..schema import CONTROLLER_SECTION, ConfigError
 from .frame_noise import FrameNoise
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
@@ -1572,22 +1573,27 @@ class AdaptiveVisualTracker:
                 self.ratio = self.ratio.to_lists()
             kernel = getattr(self.model, "dynamics_kernel", None)
             if backend == "compiled" and kernel is not None and kernel() is not None:
-                from .law_kernels import CompiledLaw
-                from .motion_scale_kernels import BufferedMotionRatio, BufferedMotionScale
-                from .prediction_kernels import BufferedFramePredictor
-                from .sample_kernels import CompiledSample, inputs_valid, supports
-
-                self._law_kernel = CompiledLaw(self.model)
-                self._inputs_valid = inputs_valid
-                m2 = 2 * self.model.m
-                self.predictor = BufferedFramePredictor.of(self.predictor, m2)
-                if self.scale is not None:
-                    self.scale = BufferedMotionScale.of(self.scale, m2)
-                if self.ratio is not None:
-                    self.ratio = BufferedMotionRatio.of(self.ratio, m2)
-                self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
-                              if supports(self) else None)
+                with compile_notice("control law"):
+                    self._compile_sample()
         return self._law_kernel
+
+    def _compile_sample(self):
+        """The compiled law, its sample and the buffered predictor, scale and ratio."""
+        from .law_kernels import CompiledLaw
+        from .motion_scale_kernels import BufferedMotionRatio, BufferedMotionScale
+        from .prediction_kernels import BufferedFramePredictor
+        from .sample_kernels import CompiledSample, inputs_valid, supports
+
+        self._law_kernel = CompiledLaw(self.model)
+        self._inputs_valid = inputs_valid
+        m2 = 2 * self.model.m
+        self.predictor = BufferedFramePredictor.of(self.predictor, m2)
+        if self.scale is not None:
+            self.scale = BufferedMotionScale.of(self.scale, m2)
+        if self.ratio is not None:
+            self.ratio = BufferedMotionRatio.of(self.ratio, m2)
+        self._fast = (CompiledSample(self._law_kernel, self.model, self.trajectory)
+                      if supports(self) else None)
 
     def _reject(self, t, q, qd, problems):
         # log when the kind of problem changes, not at every sample of a long outage

@@ -18,13 +18,26 @@
 reference the kernels are tested against.  The default (``backend=None``) is
 ``compiled`` when numba imports, else ``numpy``; the choice is logged once per
 process (INFO; a WARNING when numba is missing).
+
+Compiling the kernels takes about half a minute on the first start after an install
+or an update of the package (numba caches them on disk for the next).
+:func:`compile_notice` says so in the log, under :data:`NOTICE_LOGGER`, when a
+compile outlasts :data:`NOTICE_AFTER`, so a first start does not look hung.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import threading
+import time
 
 log = logging.getLogger(__name__)
+
+#: the logger of the compile notices (``vas`` shows it at INFO whatever its ``-v``)
+NOTICE_LOGGER = "visual_adaptive_servo.compile"
+#: s a compile lasts before it is announced
+NOTICE_AFTER = 2.0
 
 BACKENDS = ("compiled", "numpy")
 
@@ -38,7 +51,8 @@ def kernels():
     global _kernels, _import_error
     if _kernels is None and _import_error is None:
         try:
-            from . import kernels as module
+            with compile_notice("kinematic tensors"):
+                from . import kernels as module
         except ImportError as exc:
             _import_error = exc
         else:
@@ -77,3 +91,52 @@ def resolve_backend(backend, section="controller_node"):
         else:
             log.info("kinematic tensors: numpy backend (asked for)")
     return chosen
+
+
+_notice_depth = 0
+_explained = False      # the first notice of the process says why; the others only what
+
+
+@contextlib.contextmanager
+def compile_notice(what, after=None):
+    """Log that ``what`` is being compiled, if the block outlasts ``after`` s (NOTICE_AFTER).
+
+    A timer thread logs the notice while the block still runs (a first start spends
+    half a minute here and would otherwise look hung); when the block ends after a
+    notice, a second line says how long it took.  A block within another one is
+    covered by the outer one's notice.  Blocks that load the kernels from numba's
+    cache end well within ``after`` and log nothing.
+    """
+    global _notice_depth
+    _notice_depth += 1
+    if _notice_depth > 1:
+        try:
+            yield
+        finally:
+            _notice_depth -= 1
+        return
+    notices = logging.getLogger(NOTICE_LOGGER)
+    announced = threading.Event()
+
+    def announce():
+        global _explained
+        announced.set()
+        if _explained:
+            notices.info("compiling the %s with numba", what)
+            return
+        _explained = True
+        notices.info("compiling the %s with numba: the first start after an install or an "
+                     "update of the package takes up to a minute; the kernels are cached "
+                     "for the next", what)
+
+    timer = threading.Timer(NOTICE_AFTER if after is None else after, announce)
+    timer.daemon = True
+    start = time.perf_counter()
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        _notice_depth -= 1
+        if announced.is_set():
+            notices.info("%s compiled in %.0f s", what, time.perf_counter() - start)

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .backend import kernels, resolve_backend
+from .backend import compile_notice, kernels, resolve_backend
 from .urdf_chain import skew
 
 AXES = "xyz"
@@ -370,7 +370,8 @@ class KinematicRegressor:
         """
         backend = resolve_backend(backend)
         if backend == "compiled":
-            self._kernel_arguments()
+            with compile_notice("kinematic tensors"):
+                self._kernel_arguments()
         self.backend = backend
 
     def _kernel_arguments(self):

@@ -27,7 +27,7 @@ from math import cos, sin
 
 import numpy as np
 
-from .backend import kernels, resolve_backend
+from .backend import compile_notice, kernels, resolve_backend
 from .base import GRAVITY, RobotCameraModel, _lagrangian_regressor
 
 
@@ -123,12 +123,13 @@ class PaperRRRCamera(RobotCameraModel):
         """
         backend = resolve_backend(backend)
         if backend == "compiled":
-            from .dynamics_kernels import paper_regressor
+            with compile_notice("paper arm's kinematic and dynamic regressors"):
+                from .dynamics_kernels import paper_regressor
 
-            self._kernel = kernels().paper_tensors
-            self._kernel(np.zeros(3), np.zeros(3))
-            self._regressor_kernel = paper_regressor
-            self._regressor_kernel(*np.zeros((4, 3)))
+                self._kernel = kernels().paper_tensors
+                self._kernel(np.zeros(3), np.zeros(3))
+                self._regressor_kernel = paper_regressor
+                self._regressor_kernel(*np.zeros((4, 3)))
         self.backend = backend
 
     def dynamics_kernel(self):

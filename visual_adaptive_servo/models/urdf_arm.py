@@ -33,7 +33,7 @@ import logging
 
 import numpy as np
 
-from .backend import resolve_backend
+from .backend import compile_notice, resolve_backend
 from .base import GRAVITY, RobotCameraModel
 from .kinematic_regressor import KinematicRegressor
 from .resources import resolve_path
@@ -180,7 +180,8 @@ class UrdfArmCamera(RobotCameraModel):
         rng = np.random.default_rng(0)
         q = rng.uniform(-np.pi, np.pi, self.n)
         qd, xi, xi_dot = rng.standard_normal((3, self.n))
-        compiled = dynamics_kernels.chain_regressor(q, qd, xi, xi_dot, *constants)
+        with compile_notice("dynamic regressor"):
+            compiled = dynamics_kernels.chain_regressor(q, qd, xi, xi_dot, *constants)
         reference = self.dynamics.regressor(q, qd, xi, xi_dot)
         error = np.max(np.abs(compiled - reference)) / max(np.max(np.abs(reference)), 1.0)
         if not error < 1e-10:

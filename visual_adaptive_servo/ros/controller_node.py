@@ -194,6 +194,22 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("controller_node", **kwargs)
+        # the core's log lines reach the node's log at the node's own level (Python's default
+        # WARNING would drop its INFO lines: the start-up report, a long start blend, a camera
+        # coming back, the kernels compiling on a first start, which is why this comes
+        # first); the previous level comes back with destroy_node, or here if the node fails
+        core = logging.getLogger("visual_adaptive_servo")
+        self.core_level = core.level
+        core.setLevel(int(self.get_logger().get_effective_level()) or logging.INFO)
+        self.log_handler = RosLogHandler(self.get_logger())
+        core.addHandler(self.log_handler)
+        try:
+            self._start()
+        except BaseException:
+            self._release_log()
+            raise
+
+    def _start(self):
         self.specs = {spec.name: spec for spec in CONTROLLER_PARAMS}
         built = {}   # the model is built once, while the parameters are declared
 
@@ -284,14 +300,6 @@ class ControllerNode(Node):
         self.health_key = None         # what the health level of the previous sample depends on
         self.last_level = None         # its level
         self.samples = 0
-        # the core's log lines reach the node's log at the node's own level (Python's default
-        # WARNING would drop its INFO lines: the start-up report, a long start blend, a camera
-        # coming back); the previous level comes back with destroy_node
-        core = logging.getLogger("visual_adaptive_servo")
-        self.core_level = core.level
-        core.setLevel(int(self.get_logger().get_effective_level()) or logging.INFO)
-        self.log_handler = RosLogHandler(self.get_logger())
-        core.addHandler(self.log_handler)
         self.get_logger().info(f"model {params['model']} (kinematic tensors: "
                                f"{getattr(config.model, 'backend', 'numpy')} backend), joints "
                                f"{self.joint_names}, timing_mode {config.timing_mode}")
@@ -448,10 +456,14 @@ class ControllerNode(Node):
                                           f"subscribers within {FLUSH_TIMEOUT:g} s")
 
     def destroy_node(self):
+        self._release_log()
+        return super().destroy_node()
+
+    def _release_log(self):
+        """The core's logging as it was before this node."""
         core = logging.getLogger("visual_adaptive_servo")
         core.removeHandler(self.log_handler)
         core.setLevel(self.core_level)
-        return super().destroy_node()
 
 
 def main(args=None):
