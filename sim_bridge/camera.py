@@ -200,14 +200,17 @@ class PinholeCamera:
         cx, cy = get("principal_point")
         common = (fx, fy, cx, cy, int(width), int(height), tuple(get("pixel_origin")),
                   tuple(get("pixel_axes")))
-        if len(get("look_at")) not in (0, 3):
-            raise ValueError(f"{where('look_at')}: needs 3 values (or none, then "
-                             f"{prefix}rpy is used), got {len(get('look_at'))}")
-        if len(get("look_at")) == 0 and len(get("rpy")) != 3:
-            raise ValueError(f"{where('rpy')}: needs 3 values when {prefix}look_at is "
-                             f"empty, got {len(get('rpy'))}")
+        # the orientation says which of look_at (with up) and rpy is read; the other is not
+        orientation = get("orientation")
+        if orientation not in ("look_at", "rpy"):
+            raise ValueError(f"{where('orientation')}: must be 'look_at' (read look_at and "
+                             f"up) or 'rpy' (read rpy), got {orientation!r}")
+        used = "look_at" if orientation == "look_at" else "rpy"
+        if len(get(used)) != 3:
+            raise ValueError(f"{where(used)}: needs 3 values with {prefix}orientation "
+                             f"{orientation}, got {len(get(used))}")
         try:
-            if len(get("look_at")) == 3:
+            if orientation == "look_at":
                 return cls.look_at(get("position"), get("look_at"), get("up"), *common)
             return cls.from_rpy(get("position"), get("rpy"), *common)
         except ValueError as exc:

@@ -536,8 +536,9 @@ def test_a_diverged_run_says_why_in_its_row_and_in_the_summary(tmp_path):
     assert (rows["calm"]["diverged"], rows["calm"]["reason"]) == (False, "")
     strict = rows["strict"]
     assert strict["status"] == "finished" and strict["diverged"]
-    assert re.match(r"\|tau\| = \S+ N m > divergence_torque 1 at t=\d", strict["reason"]), \
-        strict["reason"]
+    assert re.match(r"commanded \|tau\| = \S+ N m \(before the torque limit\) > "
+                    r"divergence_torque 1 at t=\d",
+                    strict["reason"]), strict["reason"]
     # what vas run says of the same run (it exits with 1: diverged)
     words = shlex.split(strict["command"])
     done = subprocess.run([sys.executable, "-m", "visual_adaptive_servo.cli"] + words[1:],

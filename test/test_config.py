@@ -75,6 +75,8 @@ def test_every_schema_entry_has_a_description():
     ("sim_node.camera.pixel_axes=[1.0, 0.5]", r"sim_node\.camera\.pixel_axes: each must be 1 or"),
     ("sim_node.camera.look_at=[-5.0, 0.0, 0.0]", r"sim_node\.camera\.look_at: must differ"),
     ("sim_node.camera.orientation=euler", r"sim_node\.camera\.orientation: must be 'look_at'"),
+    ("sim_node.camera.look_at=[]",
+     r"sim_node\.camera\.look_at: needs 3 values with camera\.orientation look_at, got 0"),
     ("sim_node.camera.image_size=[640.5, 480]", r"sim_node\.camera\.image_size: two whole"),
     ("sim_node.camera.position=[-5.0, 0.5, 0.0]",
      r"sim_node\.camera: model paper_rrr assumes the paper's camera"),
@@ -91,6 +93,54 @@ def test_every_schema_entry_has_a_description():
 def test_invalid_values_are_refused_with_name_and_rule(override, message):
     with pytest.raises(ConfigError, match=message):
         load_scenario(PAPER_CONFIG, [override])
+
+
+@pytest.mark.parametrize("section", ["sim_node.camera", "controller_node.initial_estimate.camera"])
+def test_the_camera_s_orientation_says_which_of_look_at_and_rpy_is_read(section):
+    # orientation rpy once read look_at all the same (its default, [0, 0, 0]): a camera
+    # given by rpy was silently aimed at the origin
+    from sim_bridge.camera import PinholeCamera
+    from visual_adaptive_servo.models.urdf_chain import rpy_matrix
+
+    iiwa = os.path.join(ROOT, "config", "iiwa_3points.yaml")
+
+    def camera(overrides):
+        scenario = load_scenario(iiwa, [f"{section}.{o}" for o in overrides])
+        if section.startswith("sim_node"):
+            return scenario.sim.camera.rotation
+        # the guessed camera is read into the initial estimates only
+        return scenario.controller.a_z_perp_init, scenario.controller.a_z_init
+
+    if section.startswith("sim_node"):
+        rot = load_scenario(iiwa).sim.camera.rotation
+    else:
+        guess = read_param_file(iiwa)["controller_node"]
+        rot = PinholeCamera.look_at(*(guess[f"initial_estimate.camera.{k}"]
+                                      for k in ("position", "look_at", "up")),
+                                    1.0, 1.0, 0.0, 0.0, 640, 480).rotation
+    W = rot.T                                   # rpy_matrix(rpy) = rotation^T
+    rpy = [float(np.arctan2(W[2, 1], W[2, 2])), float(-np.arcsin(W[2, 0])),
+           float(np.arctan2(W[1, 0], W[0, 0]))]
+    np.testing.assert_allclose(rpy_matrix(rpy), W, atol=1e-12)
+    turned = [rpy[0] + 0.05, rpy[1], rpy[2] - 0.03]
+    look_at = camera([])
+    # rpy is read with orientation rpy, whatever look_at holds
+    by_rpy = camera(["orientation=rpy", f"rpy={turned}"])
+    elsewhere = camera(["orientation=rpy", f"rpy={turned}", "look_at=[5.0, 5.0, 5.0]"])
+    np.testing.assert_array_equal(np.hstack(elsewhere), np.hstack(by_rpy))
+    # and not read with orientation look_at
+    same = camera([f"rpy={turned}"])
+    if section.startswith("sim_node"):
+        np.testing.assert_allclose(by_rpy, rpy_matrix(turned).T, atol=1e-12)
+        np.testing.assert_allclose(camera(["orientation=rpy", f"rpy={rpy}"]), rot, atol=1e-9)
+        np.testing.assert_array_equal(same, look_at)
+    else:
+        assert not np.allclose(by_rpy[0], look_at[0])
+        np.testing.assert_allclose(camera(["orientation=rpy", f"rpy={rpy}"])[0], look_at[0],
+                                   rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(same[0], look_at[0])
+    with pytest.raises(ConfigError, match=rf"{section}\.orientation: must be 'look_at'"):
+        camera(["orientation=euler"])
 
 
 def test_a_long_list_is_named_by_its_first_failing_entry():
@@ -188,3 +238,53 @@ def test_an_install_finds_its_shared_files_where_it_installed_them(tmp_path):
         "urdf": str(checkout / "sim_bridge" / "urdf"), "config": str(checkout / "config")}
     # nothing anywhere: the checkout's places, which the error messages name
     assert own_share(str(other), environ={}, prefixes=[])["config"] == str(other / "config")
+
+
+def test_vas_run_s_camera_options_tell_both_nodes_and_set_still_wins():
+    # --camera-rate/--camera-latency once reached the simulator only: the controller kept
+    # gains designed for a frame at every sample and a new arm diverged behind a 30 Hz camera
+    from visual_adaptive_servo import cli
+
+    iiwa = os.path.join(ROOT, "config", "iiwa_3points.yaml")
+
+    def scenario(*options):
+        args = cli.build_parser().parse_args(["run", "--config", iiwa, "--out", "unused",
+                                              *options])
+        return load_scenario(iiwa, cli._run_overrides(args))
+
+    told = scenario("--camera-rate", "30", "--camera-latency", "0.033")
+    assert told.sim.camera_rate == told.controller["camera_rate"] == 30.0
+    assert told.sim.camera_latency == told.controller["camera_latency"] == 0.033
+    # the derived gamma follows the camera's delay (gain_design.delay_bandwidth / tau)
+    tau = told.controller["sample_time"] + 0.033 + 0.5 / 30.0
+    assert told.controller["gamma"] == pytest.approx(0.15 / tau)
+    assert scenario().controller["gamma"] == 20.0
+    # a controller told another camera than the simulator's, on purpose
+    other = scenario("--camera-rate", "30", "--set", "controller_node.camera_rate=60")
+    assert other.sim.camera_rate == 30.0 and other.controller["camera_rate"] == 60.0
+
+
+def test_image_bounds_left_out_are_the_guessed_camera_s_picture_in_its_pixels():
+    # a file with top-left pixels (pixel_origin [0, 0]) once got centred bounds by default
+    # and its start was refused as outside the image
+    iiwa = os.path.join(ROOT, "config", "iiwa_3points.yaml")
+
+    def without_bounds(params):
+        del params["controller_node"]["image_bounds"]
+
+    left_out = load_scenario(iiwa, edit=without_bounds).controller
+    np.testing.assert_array_equal(left_out.image_bounds, [0.0, 640.0, 0.0, 480.0])
+    turned = load_scenario(iiwa, ["controller_node.initial_estimate.camera.pixel_axes=[-1, 1]",
+                                  "controller_node.initial_estimate.camera.image_size=[800, 600]",
+                                  "controller_node.initial_estimate.camera.pixel_origin=[400, 0]"],
+                           edit=without_bounds).controller
+    np.testing.assert_array_equal(turned.image_bounds, [-400.0, 400.0, 0.0, 600.0])
+    # the paper's camera (centred, both axes turned): the bounds the paper's files write
+    paper = load_scenario(PAPER_CONFIG, edit=lambda p: p["controller_node"].pop(
+        "image_bounds")).controller
+    np.testing.assert_array_equal(paper.image_bounds, [-320.0, 320.0, -240.0, 240.0])
+    # bounds written in another convention than the camera's: the message says which
+    with pytest.raises(ConfigError, match=r"controller_node\.image_bounds \[-320\.0, 320\.0, "
+                       r"-240\.0, 240\.0\]\); the simulated camera's picture is \[0\.0, 640\.0, "
+                       r"0\.0, 480\.0\] in the controller's pixels"):
+        load_scenario(iiwa, ["controller_node.image_bounds=[-320, 320, -240, 240]"])

@@ -270,7 +270,8 @@ def test_a_far_start_is_blended_in_slowly_enough_for_the_derived_gains(tmp_path)
     assert not summary["diverged"], summary["divergence_reason"]
     assert summary["final_rms_true_error_px"] < 0.6
     assert ("start blend: x_d moves at most 10 px/s while it is blended in (start_blend_speed 1 "
-            "x its RMS image speed): a start d px off takes max(2 s, 1.875 d / 10 px/s)"
+            "x its RMS image speed, each coordinate's at least gamma x 1 px): a start d px "
+            "off takes max(2 s, 1.875 d / 10 px/s)"
             ) in summary["start_report"]
     assert "extend 300 N," in next(line for line in summary["start_report"]
                                    if line.startswith("torque limit"))

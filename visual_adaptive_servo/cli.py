@@ -48,18 +48,25 @@ def _floats(text):
 
 
 def _run_overrides(args):
-    overrides = list(args.set or [])
+    """The parameter overrides of ``vas run``'s options; ``--set`` comes last, so it wins.
+
+    ``--camera-rate`` and ``--camera-latency`` describe the camera, so both nodes get them:
+    the simulator makes its frames so, and the controller derives its gains for them
+    (``controller_node.camera_rate``, ``camera_latency``), as a user writes them into both
+    sections of a file.  A controller told another camera is ``--set controller_node...``.
+    """
+    overrides = []
     if args.initial_positions is not None:
         overrides.append(f"sim_node.initial_positions={args.initial_positions}")
     if args.pixel_noise is not None:
         overrides.append(f"sim_node.pixel_noise_std={args.pixel_noise}")
     if args.seed is not None:
         overrides.append(f"sim_node.seed={args.seed}")
-    if args.camera_rate is not None:
-        overrides.append(f"sim_node.camera_rate={args.camera_rate}")
-    if args.camera_latency is not None:
-        overrides.append(f"sim_node.camera_latency={args.camera_latency}")
-    return overrides
+    for option, name in ((args.camera_rate, "camera_rate"),
+                         (args.camera_latency, "camera_latency")):
+        if option is not None:
+            overrides += [f"sim_node.{name}={option}", f"controller_node.{name}={option}"]
+    return overrides + list(args.set or [])
 
 
 def cmd_run(args):
@@ -120,12 +127,16 @@ def build_parser():
                      help="joint positions at start [rad]")
     run.add_argument("--pixel-noise", type=float, metavar="STD", help="pixel noise std [px]")
     run.add_argument("--camera-rate", type=float, metavar="HZ",
-                     help="camera frames per second (0: one per control period)")
+                     help="camera frames per second (0: one per control period), for the "
+                          "simulator and the controller's derived gains (sim_node. and "
+                          "controller_node.camera_rate)")
     run.add_argument("--camera-latency", type=float, metavar="S",
-                     help="camera latency from capture to publication [s]")
+                     help="camera latency from capture to publication [s], for the simulator "
+                          "and the controller's derived gains (both nodes' camera_latency)")
     run.add_argument("--seed", type=int, help="noise seed")
     run.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE",
-                     help="override a parameter, e.g. controller_node.alpha=12 (repeatable)")
+                     help="override a parameter, e.g. controller_node.alpha=12 (repeatable; "
+                          "it wins over the options above)")
     run.add_argument("--controller", choices=CONTROLLER_NAMES, default=CONTROLLER_NAMES[0],
                      help="the paper's observer-based controller (default) or a baseline of "
                      "vas compare")

@@ -68,9 +68,16 @@ def check_start(sim, ctrl):
         outside = [i + 1 for i, (u, v) in enumerate(pixels.reshape(-1, 2).tolist())
                    if not (u0 <= u <= u1 and v0 <= v <= v1)]
         if outside:
+            hint = ""
+            if section.endswith("image_bounds") and not np.allclose(bounds, sim.image_bounds):
+                hint = (f"; the simulated camera's picture is "
+                        f"{[float(b) for b in sim.image_bounds]} in the controller's pixels "
+                        f"(its pixel_origin, pixel_axes): give controller_node.image_bounds "
+                        f"your camera's picture in the same pixels, or leave it out to have it "
+                        f"from initial_estimate.camera")
             raise ConfigError(f"sim_node.initial_positions: feature point(s) {outside} outside "
                               f"the image at the start (pixels {np.round(pixels, 1).tolist()}, "
-                              f"{section} {[float(b) for b in bounds]})")
+                              f"{section} {[float(b) for b in bounds]}){hint}")
     model = ctrl.model
     tensors = model.kinematic_tensors(q0, np.zeros(model.n))
     _, dH, _, W, _ = tensors

@@ -36,14 +36,15 @@ def camera_specs(prefix, what):
         ParamSpec(prefix + "position", [-5.0, 0.0, 0.0], "float_list",
                   f"{what}: centre in the URDF root frame [m]."),
         ParamSpec(prefix + "orientation", "look_at", "str",
-                  f"{what}: 'look_at' (use look_at and up) or 'rpy' (use rpy)."),
+                  f"{what}: 'look_at' (read look_at and up; rpy is not read) or 'rpy' (read "
+                  f"rpy; look_at and up are not read)."),
         ParamSpec(prefix + "look_at", [0.0, 0.0, 0.0], "float_list",
-                  f"{what}: a point on the optical axis [m]."),
+                  f"{what}: a point on the optical axis [m] (orientation look_at)."),
         ParamSpec(prefix + "up", [0.0, 0.0, 1.0], "float_list",
-                  f"{what}: the direction that points up in the picture."),
+                  f"{what}: the direction that points up in the picture (orientation look_at)."),
         ParamSpec(prefix + "rpy", [0.0, 0.0, 0.0], "float_list",
                   f"{what}: orientation of the camera frame (X right, Y down, Z along the "
-                  f"optical axis) as URDF roll-pitch-yaw [rad]."),
+                  f"optical axis) as URDF roll-pitch-yaw [rad] (orientation rpy)."),
         ParamSpec(prefix + "focal_length", 0.15, "float", f"{what}: focal length f [m].",
                   1e-9, None),
         ParamSpec(prefix + "pixel_scale", [900.0, 900.0], "float_list",
@@ -77,9 +78,6 @@ def structure_specs(default_urdf, default_base, default_tip, default_points, wha
 
 def build_camera(values, prefix, section):
     """The :class:`PinholeCamera` of the ``prefix`` parameters (ConfigError naming them)."""
-    if values[prefix + "orientation"] not in ("look_at", "rpy"):
-        raise ConfigError(f"{section}.{prefix}orientation: must be 'look_at' or 'rpy', got "
-                          f"{values[prefix + 'orientation']!r}")
     try:
         return PinholeCamera.from_params(values, prefix, section)
     except ValueError as exc:

@@ -48,6 +48,22 @@ def _nominal(model, values):
                           values["initial_estimate.inertia_scale"])
 
 
+def _picture_bounds(values):
+    """The guessed camera's picture [u_min, u_max, v_min, v_max] in the controller's pixels.
+
+    The picture's size and pixel convention are known for a real camera (no calibration
+    needed).  Entries of the wrong length are reported by the camera's own check; here
+    they give the paper camera's picture.
+    """
+    size, origin, axes = (np.asarray(values[f"initial_estimate.camera.{k}"], dtype=float)
+                          for k in ("image_size", "pixel_origin", "pixel_axes"))
+    if not size.shape == origin.shape == axes.shape == (2,):
+        return [-320.0, 320.0, -240.0, 240.0]
+    corners = axes * (np.array([[0.0, 0.0], size]) - origin)
+    return [float(corners[:, 0].min()), float(corners[:, 0].max()),
+            float(corners[:, 1].min()), float(corners[:, 1].max())]
+
+
 CONTROLLER_PARAMS = (
     ParamSpec("model", "paper_rrr", "str",
               f"Robot + camera model: one of {list(MODEL_NAMES)} (paper_rrr: the paper's arm, "
@@ -238,8 +254,10 @@ CONTROLLER_PARAMS = (
     ParamSpec("max_dt", 0.05, "float",
               "Longest interval integrated in one step [s]; longer gaps are clamped.",
               1e-5, 10.0),
-    ParamSpec("image_bounds", [-320.0, 320.0, -240.0, 240.0], "float_list",
-              "Valid feature region [u_min, u_max, v_min, v_max] [px]."),
+    ParamSpec("image_bounds", lambda m, v: _picture_bounds(v), "float_list",
+              "Valid feature region [u_min, u_max, v_min, v_max] [px].  Default: the picture "
+              "in the controller's pixels, from initial_estimate.camera's image_size, "
+              "pixel_origin and pixel_axes (what a camera's driver tells)."),
     ParamSpec("latency_compensation", True, "bool",
               "Run at every joint sample on x_hat, the latest camera frame applied at its capture "
               "time and predicted to now from the joints (false: take a frame as current when it "

@@ -627,7 +627,8 @@ class StartReport:
         if self.blend_speed > 0.0:
             out.append(f"start blend: x_d moves at most {self.blend_speed:.3g} px/s while it is "
                        f"blended in (start_blend_speed {self.blend_ratio:g} x its RMS image "
-                       f"speed): a start d px off takes max({self.blend_least:g} s, "
+                       f"speed, each coordinate's at least gamma x 1 px): a start d px off "
+                       f"takes max({self.blend_least:g} s, "
                        f"1.875 d / {self.blend_speed:.3g} px/s)")
         out.append("departures from the paper (docs/robust_adaptation.md): "
                    + (", ".join(self.departures) if self.departures else "none"))
@@ -854,7 +855,7 @@ class AdaptiveVisualTracker:
         us, vs = pixels[0::2], pixels[1::2]
         if u0 <= min(us) and max(us) <= u1 and v0 <= min(vs) and max(vs) <= v1:
             return x                # (x is finite here) every point inside: no list to make
-        outside = [i for i, (u, v) in enumerate(zip(us, vs))
+        outside = [i + 1 for i, (u, v) in enumerate(zip(us, vs))    # counted from 1
                    if not (u0 <= u <= u1 and v0 <= v <= v1)]
         if outside:
             raise InputError(f"feature x: point(s) {outside} outside the "
@@ -1416,12 +1417,13 @@ class AdaptiveVisualTracker:
         nearest = config["projection.min_depth"]
         behind = [i for i, z in enumerate(z_hat.tolist()) if not z > nearest]
         if behind:
+            # points counted from 1, as point1, point2 of unknown_lengths and the start checks
             raise ConfigError(
                 f"{CONTROLLER_SECTION}.initial_estimate: under the guessed camera feature "
-                f"point(s) {behind} lie at estimated depth(s) "
+                f"point(s) {[i + 1 for i in behind]} lie at estimated depth(s) "
                 f"{[round(z, 4) for z in z_hat[behind].tolist()]} m, behind it or nearer than "
                 f"projection.min_depth ({config['projection.min_depth']} m) at the start pose: "
-                "check initial_estimate.camera (position, look_at) against the arm")
+                "check initial_estimate.camera (position, look_at or rpy) against the arm")
         x0 = self.trajectory(0.0)[0]
         J_hat = model.image_jacobian(W, dH, x0, self.state.a_z_perp, self.state.a_z)
         sigma = np.linalg.svd(J_hat, compute_uv=False)
