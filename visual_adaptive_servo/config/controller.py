@@ -328,6 +328,13 @@ CONTROLLER_PARAMS = (
     ParamSpec("safety.fallback_damping", 5.0, "float",
               "Joint damping D of the gravity-compensation fallback [N m s/rad].", 0.0, None,
               True),
+    ParamSpec("reversed_motion", 5.0, "float",
+              "Warn when the frames move against the model's image motion, their slope on the "
+              "model's path below zero by this many standard errors (a guessed camera with a "
+              "pixel axis the wrong way, on the far side of the arm or turned past 90 deg; "
+              "also, for a second or two, a_z_perp far off relative to a_z, which the "
+              "image-motion ratio mends); a divergence's reason says so (control/reversal.py). "
+              "Needs motion_scale.enabled; 0: no check.", 0.0, None),
     ParamSpec("divergence_torque", 1e5, "float",
               "|tau| above this (before saturation) is reported as divergence [N m].", 0.0, None),
 )

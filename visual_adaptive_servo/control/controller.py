@@ -41,6 +41,7 @@ from ..schema import CONTROLLER_SECTION, ConfigError
 from .frame_noise import FrameNoise
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
                           sampled_data_margin, typical_image_speed)
+from .reversal import ReversedMotion
 from .motion_scale import MotionRatio, MotionScale
 from .prediction import FramePredictor
 from .trajectory import BlendedStart
@@ -757,6 +758,11 @@ class AdaptiveVisualTracker:
                                   config["motion_scale.ratio_significance"])
                       if self.scale is not None and config["motion_scale.ratio_rate"] > 0.0
                       else None)
+        # the frames' motion against the model's (a mirrored guess, or a ratio far off): said
+        self.reversal = (ReversedMotion(config["motion_scale.window"],
+                                        config["reversed_motion"])
+                         if self.scale is not None and config["reversed_motion"] > 0.0
+                         else None)
         # the pixel noise and tracking error measured in the frames, and the factor of the
         # derived gamma they ask for (gain_design.follow_noise): only when gamma is derived
         self.noise = (FrameNoise(config["gain_design.noise_window"],
@@ -798,6 +804,10 @@ class AdaptiveVisualTracker:
         self.last_tau = np.zeros(self.model.n)
         self.t_last_tau = None
         self.stale = False
+        # (t, text) of the reversed-motion check's first verdict, None before any
+        self.reversed_motion = None
+        if getattr(self, "reversal", None) is not None:
+            self.reversal.reset()
         self._rejecting = ()        # kinds of problem of the current rejection streak
         self.damping = self.fallback_bound = None
         # complete before the first sample when the configuration gives every gain (D comes
@@ -1007,6 +1017,9 @@ class AdaptiveVisualTracker:
         if frame is not None:
             if self.scale is not None:
                 self.scale.frame(stamp, frame)
+                if (self.reversal is not None and self.reversed_motion is None
+                        and self.reversal.due(stamp)):
+                    self._check_reversal(t, stamp, frame)
             if self.ratio is not None and self.t_last is not None:
                 # (the ratio's own paths and sums take the step as it is returned)
                 step = self.ratio.frame(stamp, frame, self._noise_variance)
@@ -1056,6 +1069,16 @@ class AdaptiveVisualTracker:
         self._commit_prediction(t, x_hat, self._prediction_rate(
             self.model.kinematic_tensors(q, qd), qd, self.state), applied)
         return self._reject(t, q, qd, problems)
+
+    def _check_reversal(self, t, stamp, frame):
+        """Feed the reversed-motion check a frame; its first verdict is logged and kept."""
+        path = self.scale.path_at(stamp)
+        if path is None:
+            return
+        verdict = self.reversal.frame(stamp, frame, path)
+        if verdict is not None:
+            self.reversed_motion = (t, verdict)
+            log.warning("t=%.3f: %s", t, verdict)
 
     def _follow_noise(self, stamp, innovation, frame):
         """Measure a frame's innovation and error x_c - x_d(t_c); move gamma with them.
