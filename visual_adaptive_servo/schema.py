@@ -138,6 +138,18 @@ def _check_range(spec, values, where):
             raise ConfigError(f"{where}: must be <= {spec.high}, got {v}")
 
 
+def did_you_mean(unknown, known):
+    """'' or ' (did you mean a for b, ...?)': the nearest known name of each unknown one."""
+    import difflib
+
+    pairs = []
+    for name in unknown:
+        near = difflib.get_close_matches(name, list(known), n=1, cutoff=0.75)
+        if near:
+            pairs.append(f"{near[0]} for {name}")
+    return f" (did you mean {', '.join(pairs)}?)" if pairs else ""
+
+
 def resolve_params(specs, params, section, build_structure):
     """Check names and types of a flat parameter dict and fill defaults, structure first.
 
@@ -148,7 +160,8 @@ def resolve_params(specs, params, section, build_structure):
     specs_by_name = {s.name: s for s in specs}
     unknown = sorted(set(params) - set(specs_by_name))
     if unknown:
-        raise ConfigError(f"{section}: unknown parameter(s) {unknown}")
+        raise ConfigError(f"{section}: unknown parameter(s) {unknown}"
+                          + did_you_mean(unknown, specs_by_name))
     values = {}
     ordered = ([s for s in specs if s.structure] + [s for s in specs if not s.structure
                                                     and not s.computed]

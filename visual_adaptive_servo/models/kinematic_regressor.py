@@ -141,6 +141,7 @@ class KinematicRegressor:
                 everything.append((f"point{i + 1}.{AXES[j]}", chain.n,
                                    chain.tip_rotation[:, j], (i,), c[j]))
         names = [e[0] for e in everything]
+        joint_names = {joint.name for joint in chain.joints} | {tip_name}
         if isinstance(unknown, str):
             if unknown != "all":
                 raise ValueError(f"unknown_lengths: 'all' or a list of names, got {unknown!r}")
@@ -149,8 +150,12 @@ class KinematicRegressor:
             chosen = set(unknown)
             missing = sorted(chosen - set(names))
             if missing:
-                raise ValueError(f"unknown_lengths: no length(s) {missing} in this chain; "
-                                 f"known names: {names}")
+                # a joint's origin component that is 0 in the URDF is no length of the chain
+                zero = [name for name in missing if name.rsplit(".", 1)[0] in joint_names]
+                why = (f" ({', '.join(zero)}: 0 in the URDF's joint origin, so not a length)"
+                       if zero else "")
+                raise ValueError(f"unknown_lengths: no length(s) {missing} in this chain"
+                                 f"{why}; known names: {names}")
         for name, frame, direction, points, value in everything:
             lengths.append(Length(name, frame, direction, points, float(value), name in chosen))
         return tuple(lengths)
