@@ -27,44 +27,64 @@ from conftest import ROOT
 from visual_adaptive_servo.models.backend import compile_notice, NOTICE_LOGGER
 
 
-def notices(caplog):
-    return [r.getMessage() for r in caplog.records if r.name == NOTICE_LOGGER]
+@pytest.fixture
+def notice_records():
+    """The notice logger's records, filled as it logs.
+
+    A handler on the logger, not pytest's caplog: with ROS sourced, launch_testing's plugin
+    makes new loggers not propagate, so caplog sees nothing under ``colcon test``
+    (conftest.logged_warnings, at INFO).
+    """
+    records = []
+    handler = logging.Handler(logging.INFO)
+    handler.emit = records.append
+    logger = logging.getLogger(NOTICE_LOGGER)
+    level = logger.level
+    logger.setLevel(logging.INFO)
+    logger.addHandler(handler)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
 
 
-def test_a_long_block_is_announced_while_it_runs_and_timed_at_its_end(caplog):
-    caplog.set_level(logging.INFO, logger=NOTICE_LOGGER)
+def notices(records):
+    return [r.getMessage() for r in list(records)]
+
+
+def test_a_long_block_is_announced_while_it_runs_and_timed_at_its_end(notice_records):
     seen_inside = []
     with compile_notice("test kernels", after=0.05):
         deadline = time.monotonic() + 10.0
-        while not notices(caplog) and time.monotonic() < deadline:
+        while not notices(notice_records) and time.monotonic() < deadline:
             time.sleep(0.01)
-        seen_inside.extend(notices(caplog))
+        seen_inside.extend(notices(notice_records))
     # the notice came while the block still ran, from the timer, not at its end
     assert len(seen_inside) == 1 and "compiling the test kernels with numba" in seen_inside[0]
-    lines = notices(caplog)
+    lines = notices(notice_records)
     assert len(lines) == 2 and lines[1].startswith("test kernels compiled in ")
 
 
-def test_a_short_block_and_a_block_within_another_say_nothing_of_their_own(caplog):
-    caplog.set_level(logging.INFO, logger=NOTICE_LOGGER)
+def test_a_short_block_and_a_block_within_another_say_nothing_of_their_own(notice_records):
     with compile_notice("quick kernels", after=30.0):
         pass
-    assert notices(caplog) == []
+    assert notices(notice_records) == []
     with compile_notice("outer kernels", after=0.05):
         with compile_notice("inner kernels", after=0.0):
             deadline = time.monotonic() + 10.0
-            while not notices(caplog) and time.monotonic() < deadline:
+            while not notices(notice_records) and time.monotonic() < deadline:
                 time.sleep(0.01)
-    lines = notices(caplog)
+    lines = notices(notice_records)
     assert len(lines) == 2 and all("outer kernels" in line for line in lines), lines
     with pytest.raises(RuntimeError):            # a failing block counts its depth down too
         with compile_notice("failing kernels", after=30.0):
             raise RuntimeError("boom")
     with compile_notice("later kernels", after=0.05):
         deadline = time.monotonic() + 10.0
-        while len(notices(caplog)) < 3 and time.monotonic() < deadline:
+        while len(notices(notice_records)) < 3 and time.monotonic() < deadline:
             time.sleep(0.01)
-    assert "later kernels" in notices(caplog)[2]
+    assert "later kernels" in notices(notice_records)[2]
 
 
 def test_vas_run_says_it_compiles_on_a_first_start_and_not_on_the_next(tmp_path):
