@@ -28,6 +28,7 @@ its error type and the section names without loading any configuration.
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -140,8 +141,6 @@ def _check_range(spec, values, where):
 
 def did_you_mean(unknown, known):
     """'' or ' (did you mean a for b, ...?)': the nearest known name of each unknown one."""
-    import difflib
-
     pairs = []
     for name in unknown:
         near = difflib.get_close_matches(name, list(known), n=1, cutoff=0.75)

@@ -41,9 +41,9 @@ from ..schema import CONTROLLER_SECTION, ConfigError
 from .frame_noise import FrameNoise
 from .gain_design import (DESIGNED, design_gains, DesignSettings, positive_definite,
                           sampled_data_margin, typical_image_speed)
-from .reversal import ReversedMotion
 from .motion_scale import MotionRatio, MotionScale
 from .prediction import FramePredictor
+from .reversal import ReversedMotion
 from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)

@@ -151,7 +151,8 @@ class KinematicRegressor:
             missing = sorted(chosen - set(names))
             if missing:
                 # a joint's origin component that is 0 in the URDF is no length of the chain
-                zero = [name for name in missing if name.rsplit(".", 1)[0] in joint_names]
+                zero = [name for name in missing if "." in name
+                        and name.rsplit(".", 1)[0] in joint_names and name[-1] in AXES]
                 why = (f" ({', '.join(zero)}: 0 in the URDF's joint origin, so not a length)"
                        if zero else "")
                 raise ValueError(f"unknown_lengths: no length(s) {missing} in this chain"
