@@ -41,7 +41,7 @@ at least ``MIN_FRAMES`` of them.
 
 It is a diagnosis, not a stop.  A guess whose a_z_perp is far off relative to a_z also
 moves the image against the model along the start's path, and that one the image-motion
-ratio (``motion_scale.ratio_rate``) mends: two of the shipped iiwa campaign's 100 draws
+ratio (``motion_scale.ratio_rate``) mends: two of 100 draws of the iiwa's real-camera campaign
 (a_z_perp x0.74 and x0.65 against a_z x1.81 and x1.75) got a verdict at 0.7-0.8 s, with
 slopes of -1.25 and -2.61, and end at 0.22 and 0.43 px.  Stopping there would have
 stopped two runs that track; the 2 x 2 map of the frames' motion on the model's has a
