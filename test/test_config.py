@@ -143,6 +143,18 @@ def test_the_camera_s_orientation_says_which_of_look_at_and_rpy_is_read(section)
         camera(["orientation=euler"])
 
 
+def test_joint_names_are_the_urdf_chain_s_in_its_order():
+    # a name the chain lacks ran a ROS launch for 15 s with every sample refused
+    iiwa = os.path.join(ROOT, "config", "iiwa_3points.yaml")
+    names = [f"lbr_iiwa_joint_{i}" for i in range(1, 8)]
+    with pytest.raises(ConfigError, match=r"controller_node\.joint_names: \['wrist_twist'\] "
+                       r"not among the URDF chain's joints"):
+        load_scenario(iiwa, [f"controller_node.joint_names={names[:6] + ['wrist_twist']}"])
+    with pytest.raises(ConfigError, match=r"controller_node\.joint_names: not in the URDF "
+                       r"chain's order"):
+        load_scenario(iiwa, [f"controller_node.joint_names={names[::-1]}"])
+
+
 def test_a_long_list_is_named_by_its_first_failing_entry():
     # a 7-joint arm with three points has 66 a_z_perp gains: the message names the entry
     # (counted from 0) and how many more fail, in plain numbers rather than 66 numpy reprs

@@ -51,7 +51,7 @@ from visual_adaptive_servo.config.scenario import load_scenario  # noqa: E402
 from visual_adaptive_servo.config.sim import SIM_PARAMS  # noqa: E402
 from visual_adaptive_servo.schema import CONTROLLER_SECTION, SIM_SECTION, ConfigError  # noqa: E402
 from visual_adaptive_servo.ros.controller_node import ControllerNode  # noqa: E402
-from visual_adaptive_servo.ros.params import to_ros  # noqa: E402
+from visual_adaptive_servo.ros.params import refuse_unknown_overrides, to_ros  # noqa: E402
 from visual_adaptive_servo.runner import run_scenario  # noqa: E402
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
@@ -226,6 +226,25 @@ def test_invalid_configuration_is_refused_at_start_up(context, overrides, match)
             Parameter(name, value=value) for name, value in overrides.items()])
     # the node that failed leaves the core's logging as it found it
     assert core.level == level and core.handlers == handlers
+
+
+def test_a_parameter_the_node_does_not_have_is_refused_naming_the_nearest(context):
+    # rclpy ignores an override of a name never declared: a typo in a params file ran as if
+    # absent, while vas run refuses the same file (run_node calls this once all is declared)
+    ctl = ControllerNode(context=context, parameter_overrides=[
+        Parameter("camera_latncy", value=0.03), Parameter("gamma", value=4.0)])
+    try:
+        with pytest.raises(ConfigError, match=r"controller_node: unknown parameter\(s\) "
+                           r"\['camera_latncy'\] \(did you mean camera_latency for "
+                           r"camera_latncy\?\)"):
+            refuse_unknown_overrides(ctl, CONTROLLER_SECTION)
+    finally:
+        ctl.destroy_node()
+    fine = ControllerNode(context=context, parameter_overrides=[Parameter("gamma", value=4.0)])
+    try:
+        refuse_unknown_overrides(fine, CONTROLLER_SECTION)     # every name given is declared
+    finally:
+        fine.destroy_node()
 
 
 def test_the_core_s_lines_while_the_model_is_built_reach_the_node_s_log(context, capfd,

@@ -474,3 +474,26 @@ def test_the_run_summary_counts_the_limit_excursions(tmp_path, capsys):
     assert code == 0
     assert ("JOINT LIMITS: a joint went past its URDF position limit 1 time(s)"
             in capsys.readouterr().err)
+
+
+def test_a_second_problem_of_the_same_input_is_logged_and_a_growing_age_is_not():
+    # a rendered camera whose detector sends one point for a two-point controller: the log
+    # once showed only 'waiting for the first camera frame' (both problems are of feature x)
+    ctl = controller()
+    with logged_warnings() as records:
+        ctl.step(0.0, Q0, np.zeros(3))                          # no frame yet
+        for k in range(1, 4):
+            ctl.step(k * T, Q0, np.zeros(3), np.zeros(1))       # the wrong size, 3 samples
+    lines = [r.getMessage() for r in records if "rejected" in r.getMessage()]
+    assert len(lines) == 2, lines
+    assert "waiting for the first camera frame" in lines[0]
+    assert "feature x" in lines[1] and "waiting" not in lines[1]
+    # a stale camera's age grows at every sample: one line for the whole outage
+    ctl = controller()
+    ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+    with logged_warnings() as records:
+        for k in range(1, 200):
+            ctl.step(k * T, Q0, np.zeros(3))
+    stale = [r.getMessage() for r in records
+             if "rejected" in r.getMessage() and "camera stale" in r.getMessage()]
+    assert len(stale) == 1, stale

@@ -393,6 +393,15 @@ class ControllerConfig(ValidatedParams):
         for name, length in lengths.items():
             require_length(v, name, length, section, name in scalar)
         require_length(v, "joint_names", model.n, section)
+        chain = list(getattr(model, "joint_names", ()))
+        if chain and list(v["joint_names"]) != chain:
+            # the law's torques are in the chain's order, and a name the chain does not have
+            # is not in /joint_states either: every sample refused, the arm at zero torque
+            strangers = [name for name in v["joint_names"] if name not in chain]
+            what = (f"{strangers} not among the URDF chain's joints" if strangers
+                    else "not in the URDF chain's order")
+            raise ConfigError(f"{section}.joint_names: {what} {chain}, got "
+                              f"{list(v['joint_names'])} (left out: the chain's own)")
         if v["timing_mode"] not in TIMING_MODES:
             raise ConfigError(f"{section}.timing_mode: must be one of {TIMING_MODES}, "
                               f"got {v['timing_mode']!r}")

@@ -31,6 +31,7 @@ Two layers:
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import dataclass, field, replace
 from math import isfinite, log as ln, sqrt
 
@@ -47,6 +48,8 @@ from .reversal import ReversedMotion
 from .trajectory import BlendedStart
 
 log = logging.getLogger(__name__)
+#: a number in a problem's text (masked when telling two problems apart)
+_NUMBER = re.compile(r"\d+(\.\d*)?(e[-+]?\d+)?")
 INF = float("inf")
 #: how often the joint positions are checked against the URDF's limits [s of sample time]
 LIMIT_CHECK_PERIOD = 0.01
@@ -1621,8 +1624,11 @@ class AdaptiveVisualTracker:
                       if supports(self) else None)
 
     def _reject(self, t, q, qd, problems):
-        # log when the kind of problem changes, not at every sample of a long outage
-        kinds = tuple(p.split(":")[0] for p in problems)
+        # log when the problem changes, not at every sample of a long outage: its text with
+        # the numbers masked (a stale camera's age grows every sample), so a second problem
+        # of the same input ('waiting for the first camera frame', then 'expected 4 values')
+        # is logged too
+        kinds = tuple(_NUMBER.sub("#", p) for p in problems)
         if kinds != self._rejecting:
             for p in problems:
                 log.warning("sample at t=%.4f rejected: %s", t, p)

@@ -55,6 +55,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..schema import ConfigError
 from .executor import KeptWaitSetExecutor
+from .params import refuse_unknown_overrides
 from .scheduling import fifo_threads, realtime_threads
 
 SPIN_TIMEOUT = 0.1    # s of wall time: the longest a stop request waits for the executor
@@ -132,7 +133,9 @@ def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
             node = make_node()
             executor = make_executor(node)
             realtime_scheduling(node)
-        except config_errors as exc:
+            # every parameter is declared now: a name given that none of them has is a typo
+            refuse_unknown_overrides(node, name)
+        except (*config_errors, ConfigError) as exc:
             rclpy.logging.get_logger(name).fatal(f"invalid configuration: {exc}")
             return 2
         finished = getattr(node, "finished", None)

@@ -37,7 +37,7 @@ from rcl_interfaces.msg import (
 from rclpy.exceptions import ParameterException
 
 from ..recording.cadence import checked_rate
-from ..schema import ConfigError
+from ..schema import ConfigError, did_you_mean
 
 PARAMETER_TYPES = {
     "float": ParameterType.PARAMETER_DOUBLE,
@@ -177,3 +177,22 @@ def declare_rate(node, section, name, default, description):
                                    f"{description} [Hz], positive and finite.",
                                    dynamic_typing=True)
     return checked_rate(f"{section}.{name}", value)
+
+
+def refuse_unknown_overrides(node, section):
+    """ConfigError naming the parameters given to ``node`` that it never declared.
+
+    A params file, a launch file or the constructor may set a name the node does not
+    have -- a typo -- and rclpy ignores it silently, while ``vas run`` refuses the same
+    file.  Call once every parameter is declared.  rclpy keeps the overrides in
+    ``Node._parameter_overrides`` (no public getter in Jazzy); the declared names come
+    from ``get_parameters_by_prefix("")``.
+    """
+    given = getattr(node, "_parameter_overrides", None) or {}
+    unknown = sorted(name for name in given if not node.has_parameter(name))
+    if unknown:
+        known = list(node.get_parameters_by_prefix(""))
+        raise ConfigError(f"{section}: unknown parameter(s) {unknown}"
+                          + did_you_mean(unknown, known)
+                          + " (set in the params file or the launch; the node does not have "
+                          "them)")
