@@ -76,7 +76,7 @@ from visual_adaptive_servo.config.ros2_control import (
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
 from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
-    rate_arguments, rates
+    rate_arguments, rates, recording_folder
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -157,7 +157,7 @@ def _nodes(context):
             TimerAction(period=RECORDER_GRACE, actions=[shutdown]) if record else shutdown])),
     ]
     if record:
-        bag_dir = LaunchConfiguration("bag_dir").perform(context)
+        bag_dir = recording_folder(context)
         cmd = ["ros2", "bag", "record", "-s", "mcap"] + (["-o", bag_dir] if bag_dir else [])
         cmd += ["--topics"] + sorted(TOPICS) + [HARDWARE_COMMANDS, HARDWARE_STATES]
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),

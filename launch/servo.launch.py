@@ -69,7 +69,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
-    rate_arguments, rates, recorder_qos_overrides
+    rate_arguments, rates, recorder_qos_overrides, recording_folder
 
 PACKAGE = "visual_adaptive_servo"
 # s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
@@ -128,7 +128,7 @@ def _nodes(context):
         actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
                                                           on_exit=on_exit)))
     if record:
-        bag_dir = LaunchConfiguration("bag_dir").perform(context)
+        bag_dir = recording_folder(context)
         cmd = ["ros2", "bag", "record", "-s", "mcap"]
         if bag_dir:
             cmd += ["-o", bag_dir]

@@ -18,6 +18,7 @@
 ``executor`` and ``realtime_priority``: how every node of ours runs (ros/main.py).
 """
 
+import os
 import tempfile
 
 import yaml
@@ -88,3 +89,19 @@ def recorder_qos_overrides(topics, folder=None):
     with open(handle, "w", encoding="utf-8") as stream:
         yaml.safe_dump(overrides, stream)
     return path
+
+
+def recording_folder(context):
+    """The ``bag_dir`` launch argument ('' for ros2 bag's own name), refused if it exists.
+
+    ``ros2 bag record -o`` refuses an existing folder and exits; the simulator, told to
+    wait for the recorder, then waited for it until Ctrl-C.  A failed launch leaves its
+    folder behind, so the next one with the same ``bag_dir`` hung that way.  Raised
+    before any process starts.
+    """
+    bag_dir = LaunchConfiguration("bag_dir").perform(context)
+    if bag_dir and os.path.exists(bag_dir):
+        raise RuntimeError(f"bag_dir {bag_dir}: exists, and ros2 bag record refuses an existing "
+                           f"folder (a run that failed leaves its own behind): remove it or "
+                           f"choose another")
+    return bag_dir
