@@ -49,6 +49,19 @@ CAMERA_KEYS = ("position", "look_at", "up", "rpy", "focal_length", "pixel_scale"
                "principal_point", "image_size", "pixel_origin", "pixel_axes")
 
 
+def picture_bounds(size, pixel_origin, pixel_axes):
+    """[u_min, u_max, v_min, v_max] of a picture of ``size`` (width, height), in controller pixels.
+
+    A controller pixel is ``pixel_axes * (raw - pixel_origin)``.  Also a guessed camera's
+    picture, from what its driver tells (``controller_node.image_bounds``' default).
+    """
+    corners = (np.asarray(pixel_axes, float)
+               * (np.array([[0.0, 0.0], np.asarray(size, float)])
+                  - np.asarray(pixel_origin, float)))
+    u, v = corners[:, 0], corners[:, 1]
+    return np.array([u.min(), u.max(), v.min(), v.max()])
+
+
 @dataclass(frozen=True)
 class PinholeCamera:
     """A fixed pinhole camera (see the module docstring for every convention).
@@ -124,9 +137,7 @@ class PinholeCamera:
     @property
     def image_bounds(self):
         """[u_min, u_max, v_min, v_max] of the picture in the controller's pixels."""
-        corners = self.to_pixels(np.array([[0.0, 0.0], [self.width, self.height]]))
-        u, v = corners[0::2], corners[1::2]
-        return np.array([u.min(), u.max(), v.min(), v.max()])
+        return picture_bounds((self.width, self.height), self.pixel_origin, self.pixel_axes)
 
     def to_pixels(self, raw):
         """Controller pixels (2m,) of raw image coordinates (m, 2)."""

@@ -228,6 +228,8 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
         if recorder is not None:
             recorder.close()
     data = series.view()
+    # (t, text) of the first time the frames moved against the model's image motion, or None
+    reversed_motion = getattr(ctl, "reversed_motion", None)
     if diverged:
         joints = list(scenario.sim.joint_names)
         origin = divergence_origin(data, {"tau": joints, "qd": joints,
@@ -235,7 +237,6 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                                           "a_z": model.a_z_labels, "a_d": model.a_d_labels})
         if origin is not None:
             reason += f"; grew first: {origin[0]} at t={origin[1]:.3f} s"
-        reversed_motion = getattr(ctl, "reversed_motion", None)
         if reversed_motion is not None:
             reason += (f"; the frames moved against the model's image motion from "
                        f"t={reversed_motion[0]:.3f} s: check initial_estimate.camera "
@@ -244,8 +245,6 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
                                    getattr(ctl, "frame_noise", math.nan)))
     # times a joint went past its URDF position limit (the controller warned each time)
     counters["joint_limit_excursions"] = getattr(ctl, "limit_excursions", 0)
-    # when the frames were first found moving against the model's image motion (NaN: never)
-    reversed_motion = getattr(ctl, "reversed_motion", None)
     counters["reversed_motion_t"] = math.nan if reversed_motion is None else reversed_motion[0]
     counters.update(detections.figures())
     summary = summarize(data, series.status, wall, diverged, reason, counters, period)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sim_bridge.camera import PinholeCamera
+from sim_bridge.camera import PinholeCamera, picture_bounds
 
 from ..control.controller import check_alpha_gamma
 from ..control.gain_design import DESIGNED, DesignSettings
@@ -59,9 +59,7 @@ def _picture_bounds(values):
                           for k in ("image_size", "pixel_origin", "pixel_axes"))
     if not size.shape == origin.shape == axes.shape == (2,):
         return [-320.0, 320.0, -240.0, 240.0]
-    corners = axes * (np.array([[0.0, 0.0], size]) - origin)
-    return [float(corners[:, 0].min()), float(corners[:, 0].max()),
-            float(corners[:, 1].min()), float(corners[:, 1].max())]
+    return picture_bounds(size, origin, axes).tolist()
 
 
 CONTROLLER_PARAMS = (
