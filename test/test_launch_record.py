@@ -23,8 +23,9 @@ for the first STALL seconds (SIGSTOP: the run is over before it goes on), and
 the tracking error in the
 bag must equal the one ``vas run`` records for the same file to 1e-6 px at
 every stamp (the oracle: the same simulator and controller in one process,
-fed the pixels and times the messages carry).  Skipped without launch_testing
-or when the package is not installed (colcon build).
+fed the pixels and times the messages carry), and so must ``vas report``'s
+figures of the two bags.  Skipped without launch_testing or when the package
+is not installed (colcon build).
 """
 
 import os
@@ -51,6 +52,7 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource
 from conftest import bag_counts, bag_messages
 from launch import LaunchDescription
 from visual_adaptive_servo.recording import messages as m
+from visual_adaptive_servo.recording.bag_report import bag_figures, read_bag
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.runner import run_scenario
 
@@ -164,3 +166,10 @@ class TestBag(unittest.TestCase):
         stamps = sorted(reference)
         np.testing.assert_allclose([recorded[s] for s in stamps], [reference[s] for s in stamps],
                                    rtol=0.0, atol=1e-6)
+        # vas report reads the recorder's folder as vas run's file: the same figures
+        launched = bag_figures(read_bag(bag_dir))
+        in_process = bag_figures(read_bag(os.path.join(out, "run.mcap")))
+        for key in ("final_rms_frame_error_px", "max_frame_error_px",
+                    "final_rms_tracking_error_px", "max_abs_torque", "final_depth_error",
+                    "joint_states", "camera_frames", "commands_per_joint_state"):
+            self.assertAlmostEqual(launched[key], in_process[key], places=6, msg=key)

@@ -113,6 +113,23 @@ def cmd_robustness(args):
     return 1 if failed else 0
 
 
+def cmd_report(args):
+    import os
+
+    from .recording.bag_report import BagError, read_bag, report_lines, write_report
+
+    bag = os.path.normpath(args.bag)
+    out = args.out or f"{os.path.splitext(bag)[0]}_report"
+    try:
+        figures = write_report(read_bag(bag), out, args.window)
+    except BagError as exc:
+        print(f"vas: {exc}", file=sys.stderr)
+        return 2
+    print("\n".join(report_lines(figures)))
+    print(f"outputs in {out}: {', '.join(figures['outputs'])}")
+    return 0
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="vas", description=__doc__.split("\n\n")[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log every rejected sample")
@@ -154,6 +171,17 @@ def build_parser():
     rob.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on a terminal)")
     rob.set_defaults(func=cmd_robustness)
+    report = sub.add_parser(
+        "report", help="the figures and plots of a recorded run: a ros2 bag record folder "
+        "or vas run's run.mcap")
+    report.add_argument("bag", help="rosbag2 folder (ros2 launch ... record:=true, ros2 bag "
+                        "record) or .mcap file")
+    report.add_argument("--out", help="output folder for report.json and the PNGs (default: "
+                        "BAG_report beside the bag)")
+    report.add_argument("--window", type=float, default=5.0, metavar="S",
+                        help="final_rms_error_px over the last S seconds (default 5, as "
+                        "vas run's summary.json)")
+    report.set_defaults(func=cmd_report)
     add_compare_parser(sub)
     add_teach_parser(sub, _floats)
     add_campaign_parser(sub)

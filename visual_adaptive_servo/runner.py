@@ -71,8 +71,9 @@ class Series:
 
     def __init__(self, steps, model):
         n, m2, m = model.n, 2 * model.m, model.m
-        shapes = {"t": (), "x": (m2,), "x_true": (m2,), "x_d": (m2,), "x_obs": (m2,), "z": (m,),
-                  "z_hat": (m,),
+        # x_stamp: the capture time of the frame in x (NaN where none)
+        shapes = {"t": (), "x": (m2,), "x_stamp": (), "x_true": (m2,), "x_d": (m2,),
+                  "x_obs": (m2,), "z": (m,), "z_hat": (m,),
                   "q": (n,), "qd": (n,), "tau": (n,), "a_z_perp": (model.p_perp,),
                   "a_z": (model.p_z,), "a_d": (model.p_d,), "sigma_min_J_star": (),
                   "damped": (), "motion_scale": (), "gamma": ()}
@@ -181,10 +182,11 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
             counters["saturated"] += res.saturated
             counters["projection_active"] += res.projection_active
             counters["damped"] += res.damped
-            x = pixels if pixels is not None else np.nan
-            series.add(t=meas.t, x=x, x_true=truth.true_pixels, x_d=res.x_d, x_obs=res.x_obs,
-                       z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q, qd=truth.qd,
-                       tau=res.tau,
+            x, x_stamp = ((pixels, meas.feature_stamp) if pixels is not None
+                          else (np.nan, np.nan))
+            series.add(t=meas.t, x=x, x_stamp=x_stamp, x_true=truth.true_pixels, x_d=res.x_d,
+                       x_obs=res.x_obs, z=truth.true_depth, z_hat=res.z_hat, q=truth.true_q,
+                       qd=truth.qd, tau=res.tau,
                        a_z_perp=res.state.a_z_perp, a_z=res.state.a_z, a_d=res.state.a_d,
                        sigma_min_J_star=res.sigma_min, damped=float(res.damped),
                        motion_scale=res.motion_scale, gamma=res.gamma)

@@ -70,7 +70,10 @@ def summarize(data, status, wall, diverged, reason, counters, period):
                 "realtime_factor": 0.0, **transient, **counters}
     window = t >= t[-1] - RMS_WINDOW_S + 1e-9
     sim_time = float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0))
-    rms, peak = error_figures(data["x"], data["x_d"], window)
+    # the frames against x_d at their capture, over the frames captured in the window
+    captured = data.get("x_stamp", t)
+    rms, peak = error_figures(data["x"], desired_at(t, data["x_d"], captured),
+                              captured >= t[-1] - RMS_WINDOW_S + 1e-9)
     rms_true, peak_true = error_figures(data["x_true"], data["x_d"], window)
     depth_err = data["z_hat"][-1] - data["z"][-1]
     return {
@@ -89,6 +92,26 @@ def summarize(data, status, wall, diverged, reason, counters, period):
         **transient,
         **counters,
     }
+
+
+def desired_at(t, x_d, times):
+    """x_d (N, 2m) of samples at ``t`` (N,), linear between them, at ``times`` (K,) -> (K, 2m).
+
+    NaN at a time outside the samples where x_d is defined (before the controller's
+    first sample: a frame captured before the start).  A camera frame captured at
+    ``times`` is judged against this: x_d where the arm should have been when the
+    picture was taken, not when it arrived.
+    """
+    times = np.asarray(times, dtype=float)
+    defined = np.isfinite(x_d).all(axis=1)
+    out = np.full((len(times), x_d.shape[1]), math.nan)
+    if not defined.any():
+        return out
+    t_d, x_d = t[defined], x_d[defined]
+    inside = (times >= t_d[0] - 1e-9) & (times <= t_d[-1] + 1e-9)
+    out[inside] = np.column_stack([np.interp(times[inside], t_d, x_d[:, j])
+                                   for j in range(x_d.shape[1])])
+    return out
 
 
 def point_error(x, x_d):

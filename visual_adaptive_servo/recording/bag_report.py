@@ -1,0 +1,362 @@
+# Copyright 2026 visual_adaptive_servo contributors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The figures and plots of a recorded run: ``vas report BAG`` (rosbags, numpy).
+
+A run through ROS writes no summary.json and no PNG: its record is the bag
+(``ros2 launch ... record:=true``, or ``ros2 bag record`` beside a real arm).
+:func:`read_bag` reads a rosbag2 folder (MCAP or SQLite storage) or a single
+``.mcap`` file (``vas run``'s run.mcap) and :func:`bag_figures` computes from it
+what summary.json holds of the tracking, with the same definitions
+(:mod:`.summary`), plus what only a bag shows: the joint states' and the camera
+frames' largest gaps, the commands per joint state, and every
+``/diagnostics`` status that was not OK.
+
+What a bag cannot have is the true error: the camera's pixels carry their
+noise, and the figures are of the error the controller published
+(``/controller_node/tracking_error``, x - x_d), as summary.json's
+``final_rms_error_px`` is.  ``final_depth_error`` needs the simulator's
+``/sim_node/true_depth``.
+
+Times are header stamps, in seconds from the first joint state.  A
+Float64MultiArray has no header: it gets the stamp of the message its node
+published with it (``~/observed`` for the controller's, ``/joint_states`` for
+the simulator's), matched by the time the recorder received them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import messages as m
+from .recorder import CONTROLLER_NS, SIM_NS
+from .summary import RMS_WINDOW_S, desired_at, error_figures
+
+JOINT_STATES = "/joint_states"
+FEATURES = "/camera/features"
+COMMANDS = "/effort_controller/commands"
+TRUE_DEPTH = f"{SIM_NS}/true_depth"
+DESIRED = f"{CONTROLLER_NS}/desired"
+OBSERVED = f"{CONTROLLER_NS}/observed"
+TRACKING_ERROR = f"{CONTROLLER_NS}/tracking_error"
+ESTIMATED_DEPTH = f"{CONTROLLER_NS}/estimated_depth"
+PARAMETERS = f"{CONTROLLER_NS}/parameters"
+EFFORT_COMMAND = f"{CONTROLLER_NS}/effort_command"
+DIAGNOSTICS = "/diagnostics"
+# the unstamped arrays and the stamped topic published with each (see the module docstring)
+STAMPED_WITH = {ESTIMATED_DEPTH: OBSERVED, PARAMETERS: OBSERVED, TRUE_DEPTH: JOINT_STATES,
+                COMMANDS: EFFORT_COMMAND}
+READ = (JOINT_STATES, FEATURES, COMMANDS, TRUE_DEPTH, DESIRED, OBSERVED, TRACKING_ERROR,
+        ESTIMATED_DEPTH, PARAMETERS, EFFORT_COMMAND, DIAGNOSTICS)
+# plots.plot_recording's names of the topics
+PLOTTED = {"error": TRACKING_ERROR, "desired": DESIRED, "observed": OBSERVED,
+           "features": FEATURES, "torque": EFFORT_COMMAND, "z_hat": ESTIMATED_DEPTH,
+           "z": TRUE_DEPTH, "parameters": PARAMETERS, "joint_states": JOINT_STATES}
+LEVELS = {level: name for name, level in m.DIAGNOSTIC_LEVELS.items()}
+
+
+class BagError(ValueError):
+    """A bag that cannot be read, or holds nothing to report."""
+
+
+@dataclass
+class Signal:
+    """One topic's messages: stamps [s] (NaN: none), receive times [ns], values (N, w)."""
+
+    t: np.ndarray
+    received: np.ndarray
+    values: np.ndarray
+    labels: list = field(default_factory=list)
+
+
+@dataclass
+class Recording:
+    """What :func:`read_bag` read: signals by topic, /diagnostics statuses, message counts."""
+
+    path: str
+    signals: dict
+    diagnostics: list            # (t [s], name, level name, message), in the bag's order
+    counts: dict                 # every topic of the bag, read or not
+    t0_ns: int                   # the first joint state's stamp (else the first stamp)
+
+
+def _values(topic, msg, joint_names):
+    """(stamp [ns] or None, values (w,), labels) of a message of ``topic``."""
+    if topic in (JOINT_STATES, EFFORT_COMMAND):
+        names = joint_names.setdefault(topic, list(msg.name))
+        if list(msg.name) != names:
+            raise BagError(f"{topic}: the joint names changed from {names} to {list(msg.name)}")
+        parts = [np.asarray(msg.effort, float)] if topic == EFFORT_COMMAND else [
+            np.asarray(getattr(msg, key), float) for key in ("position", "velocity", "effort")]
+        if any(len(part) not in (0, len(names)) for part in parts):
+            raise BagError(f"{topic}: {len(names)} names but position/velocity/effort of "
+                           f"{[len(part) for part in parts]} values")
+        parts = [part if len(part) else np.full(len(names), math.nan) for part in parts]
+        return m.stamp_to_ns(msg.header.stamp), np.concatenate(parts), names
+    if topic in (FEATURES, DESIRED, OBSERVED, TRACKING_ERROR):
+        return m.stamp_to_ns(msg.header.stamp), m.features_from_msg(msg)[1], []
+    values, labels = m.float_array_from_msg(msg)
+    return None, values, labels or []
+
+
+def _stack(topic, rows, t0_ns):
+    """The Signal of a topic's rows, its stamps in seconds from ``t0_ns``."""
+    widths = {len(values) for _, _, values, _ in rows}
+    if len(widths) > 1:
+        raise BagError(f"{topic}: messages of {sorted(widths)} values; one size expected")
+    return Signal(t=np.array([math.nan if row[0] is None else (row[0] - t0_ns) * 1e-9
+                              for row in rows], dtype=float),
+                  received=np.array([row[1] for row in rows], dtype=np.int64),
+                  values=np.array([row[2] for row in rows], dtype=float).reshape(len(rows), -1),
+                  labels=rows[-1][3])
+
+
+def _stamp_by_partner(signal, partner):
+    """Stamps for an unstamped signal: those of ``partner``'s messages received nearest."""
+    if partner is None:
+        return
+    order = np.argsort(partner.received, kind="stable")
+    received = partner.received[order]
+    at = np.searchsorted(received, signal.received)
+    lo, hi = np.clip(at - 1, 0, len(received) - 1), np.clip(at, 0, len(received) - 1)
+    nearest = np.where(np.abs(received[lo] - signal.received)
+                       <= np.abs(received[hi] - signal.received), lo, hi)
+    signal.t = partner.t[order][nearest]
+
+
+def read_bag(path):
+    """A :class:`Recording` of the package's topics in the rosbag2 at ``path``.
+
+    ``path`` is a ``ros2 bag record`` folder or an ``.mcap`` file.  Raises
+    FileNotFoundError for a path that does not exist and :class:`BagError`
+    naming the problem for anything else it cannot read.
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag (a ros2 bag record folder or an .mcap "
+                                f"file)")
+    rows = {topic: [] for topic in READ}
+    diagnostics, joint_names = [], {}
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 -- rosbags raises its own kinds, named here
+        raise BagError(f"{path}: not a readable rosbag2 (a ros2 bag record folder or an "
+                       f".mcap file): {type(exc).__name__}: {exc}") from exc
+    try:
+        counts = {}
+        for connection in reader.connections:
+            counts[connection.topic] = counts.get(connection.topic, 0) + connection.msgcount
+        # (no connection at all would read every message)
+        wanted = [c for c in reader.connections if c.topic in rows]
+        for connection, received, raw in (reader.messages(connections=wanted) if wanted
+                                          else ()):
+            msg = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == DIAGNOSTICS:
+                stamp = m.stamp_to_ns(msg.header.stamp)
+                diagnostics += [(stamp, status.name, LEVELS.get(int(status.level), "UNKNOWN"),
+                                 status.message) for status in msg.status]
+                continue
+            stamp, values, labels = _values(connection.topic, msg, joint_names)
+            rows[connection.topic].append((stamp, received, values, labels))
+    finally:
+        reader.close()
+    stamps = [row[0] for found in rows.values() for row in found if row[0] is not None]
+    if rows[JOINT_STATES]:
+        t0_ns = rows[JOINT_STATES][0][0]
+    elif stamps:
+        t0_ns = min(stamps)
+    else:
+        raise BagError(f"{path}: none of the package's topics is in the bag (it has "
+                       f"{sorted(counts) or 'no topic'}); expected {JOINT_STATES}, "
+                       f"{TRACKING_ERROR} and the others of servo.launch.py record:=true")
+    signals = {topic: _stack(topic, found, t0_ns) for topic, found in rows.items() if found}
+    for topic, partner in STAMPED_WITH.items():
+        if topic in signals:
+            _stamp_by_partner(signals[topic], signals.get(partner))
+    return Recording(str(path), signals,
+                     [((ns - t0_ns) * 1e-9, *rest) for ns, *rest in diagnostics], counts, t0_ns)
+
+
+def _gaps(t):
+    """(mean rate [Hz], median and largest interval [s], where the largest ends [s])."""
+    if len(t) < 2:
+        return math.nan, math.nan, math.nan, math.nan
+    steps = np.diff(t)
+    k = int(np.argmax(steps))
+    span = t[-1] - t[0]
+    return ((len(t) - 1) / span if span > 0 else math.inf), float(np.median(steps)), \
+        float(steps[k]), float(t[k + 1])
+
+
+def _joint_columns(signal, part):
+    """The (N, n) block ``part`` (0 position, 1 velocity, 2 effort) of a JointState signal."""
+    n = len(signal.labels)
+    return signal.values[:, part * n:(part + 1) * n]
+
+
+def bag_figures(rec, window=RMS_WINDOW_S):
+    """The report's figures of a :class:`Recording` (the module docstring); a dict for JSON.
+
+    ``window``: final_rms_error_px is over the last ``window`` seconds, up to the
+    last joint state (the last stamp of any kind without one).
+    """
+    sig = rec.signals
+    times = {topic: s.t for topic, s in sig.items()}
+    ends = [t[np.isfinite(t)].max() for t in times.values() if np.isfinite(t).any()]
+    end = float(times[JOINT_STATES][-1]) if JOINT_STATES in sig else max(ends)
+    figures = {"bag": rec.path, "duration_s": end, "window_s": window,
+               "messages": dict(sorted(rec.counts.items())),
+               "missing": [topic for topic in READ if topic not in rec.counts]}
+    for topic, key in ((JOINT_STATES, "joint_states"), (FEATURES, "camera_frames")):
+        if topic in sig:
+            rate, median, gap, at = _gaps(np.sort(times[topic]))
+            figures.update({f"{key}": len(times[topic]), f"{key}_rate_hz": rate,
+                            f"{key}_median_interval_s": median, f"{key}_largest_gap_s": gap,
+                            f"{key}_largest_gap_at_s": at})
+    if FEATURES in sig and DESIRED in sig:
+        t, err = frame_errors(times[FEATURES], sig[FEATURES].values, times[DESIRED],
+                              sig[DESIRED].values)
+        figures.update(_error_figures("frame", t, err, end, window))
+    if TRACKING_ERROR in sig:
+        figures.update(_error_figures("tracking", times[TRACKING_ERROR],
+                                      sig[TRACKING_ERROR].values, end, window))
+        if OBSERVED in sig:
+            figures["samples_without_tracking_error"] = (len(times[OBSERVED])
+                                                         - len(times[TRACKING_ERROR]))
+    command = sig.get(EFFORT_COMMAND, sig.get(COMMANDS))
+    if command is not None:
+        tau = command.values
+        figures["max_abs_torque"] = float(np.nanmax(np.abs(tau)))
+        if command.labels and EFFORT_COMMAND in sig:
+            figures["max_abs_torque_by_joint"] = dict(zip(
+                command.labels, np.nanmax(np.abs(tau), axis=0).tolist()))
+        if JOINT_STATES in sig:
+            figures["commands_per_joint_state"] = len(tau) / len(times[JOINT_STATES])
+    if ESTIMATED_DEPTH in sig:
+        z_hat = sig[ESTIMATED_DEPTH].values
+        figures["min_estimated_depth"] = float(np.nanmin(z_hat))
+        if TRUE_DEPTH in sig:
+            error = z_hat[-1] - sig[TRUE_DEPTH].values[-1]
+            figures["final_depth_error"] = (float(error[0]) if error.size == 1
+                                            else error.tolist())
+    figures["diagnostics"] = diagnostics_figures(rec.diagnostics)
+    return figures
+
+
+def frame_errors(t_frames, frames, t_desired, desired):
+    """(capture times, x - x_d(capture time)) of the camera frames within x_d's span.
+
+    x_d between the controller's samples is interpolated linearly
+    (:func:`.summary.desired_at`, as summary.json judges the frames); a frame with
+    a NaN pixel (a fault) is left out.
+    """
+    if frames.shape[1] != desired.shape[1]:
+        raise BagError(f"{FEATURES} has {frames.shape[1] // 2} points and {DESIRED} "
+                       f"{desired.shape[1] // 2}")
+    err = frames - desired_at(t_desired, desired, t_frames)
+    kept = np.isfinite(err).all(axis=1)
+    return t_frames[kept], err[kept]
+
+
+def _error_figures(kind, t, err, end, window):
+    """final_rms_<kind>_error_px (the last ``window`` s up to ``end``), its largest, by point."""
+    if not len(t):
+        return {f"{kind}_errors": 0}
+    last = t >= end - window + 1e-9
+    rms, peak = error_figures(err, np.zeros_like(err), last)
+    points = np.linalg.norm(err.reshape(len(t), -1, 2), axis=2)
+    return {f"final_rms_{kind}_error_px": rms, f"max_{kind}_error_px": peak,
+            f"max_{kind}_error_at_s": float(t[np.argmax(points.max(axis=1))]),
+            f"final_rms_{kind}_error_px_by_point": [
+                float(np.sqrt(np.mean(points[last, i] ** 2))) if last.any() else math.nan
+                for i in range(points.shape[1])],
+            f"{kind}_errors": len(t)}
+
+
+def diagnostics_figures(statuses):
+    """Per status name: messages by level, and the first and last that were not OK."""
+    out = {}
+    for t, name, level, message in statuses:
+        entry = out.setdefault(name, {"count": {}, "first_problem": None, "last_problem": None})
+        entry["count"][level] = entry["count"].get(level, 0) + 1
+        if level != "OK":
+            problem = {"t": t, "level": level, "message": message}
+            entry["first_problem"] = entry["first_problem"] or problem
+            entry["last_problem"] = problem
+    return out
+
+
+def report_lines(figures):
+    """The report as a few lines of text, for the terminal."""
+    lines = [f"{figures['bag']}: {figures['duration_s']:.3f} s"]
+    for key, what in (("joint_states", "joint states"), ("camera_frames", "camera frames")):
+        if key in figures:
+            gap, median = figures[f"{key}_largest_gap_s"], figures[f"{key}_median_interval_s"]
+            timing = (f"largest gap {1e3 * gap:.1f} ms (ending at "
+                      f"t={figures[f'{key}_largest_gap_at_s']:.3f} s), median "
+                      f"{1e3 * median:.1f} ms" if gap > 1.5 * median
+                      else f"intervals regular (largest {1e3 * gap:.1f} ms)")
+            lines.append(f"{what}: {figures[key]} at {figures[f'{key}_rate_hz']:.1f} Hz, "
+                         f"{timing}")
+    for kind, what in (("frame", "camera frames - x_d at their capture (noise included)"),
+                       ("tracking", "~/tracking_error, the law's x - x_d")):
+        if f"final_rms_{kind}_error_px" in figures:
+            lines.append(f"{what}: RMS {figures[f'final_rms_{kind}_error_px']:.4g} px over "
+                         f"the last {figures['window_s']:g} s, largest "
+                         f"{figures[f'max_{kind}_error_px']:.4g} px at "
+                         f"t={figures[f'max_{kind}_error_at_s']:.3f} s")
+    if "max_abs_torque" in figures:
+        lines.append(f"largest commanded torque: {figures['max_abs_torque']:.4g} N m")
+    if "final_depth_error" in figures:
+        lines.append(f"depth estimate - true depth at the end: {figures['final_depth_error']}")
+    for name, entry in figures["diagnostics"].items():
+        problem = entry["first_problem"]
+        if problem is not None:
+            counts = ", ".join(f"{n} {level}" for level, n in entry["count"].items())
+            lines.append(f"diagnostics {name!r} ({counts}): first {problem['level']} at "
+                         f"t={problem['t']:.3f} s: {problem['message']}")
+    if figures["missing"]:
+        lines.append(f"not in the bag: {', '.join(figures['missing'])}")
+    return lines
+
+
+def write_report(rec, out_dir, window=RMS_WINDOW_S):
+    """report.json and the PNGs of a Recording in ``out_dir`` (created); returns the figures."""
+    from .plots import plot_recording
+    from .recorder import write_json
+
+    os.makedirs(out_dir, exist_ok=True)
+    figures = bag_figures(rec, window)
+    series = {key: (rec.signals[topic].t, rec.signals[topic].values,
+                    rec.signals[topic].labels)
+              for key, topic in PLOTTED.items() if topic in rec.signals}
+    if FEATURES in rec.signals and DESIRED in rec.signals:
+        t, err = frame_errors(rec.signals[FEATURES].t, rec.signals[FEATURES].values,
+                              rec.signals[DESIRED].t, rec.signals[DESIRED].values)
+        series["frame_error"] = (t, err)
+    if "torque" not in series and COMMANDS in rec.signals:
+        series["torque"] = (rec.signals[COMMANDS].t, rec.signals[COMMANDS].values, [])
+    figures["outputs"] = ["report.json"] + [
+        os.path.basename(p) for p in plot_recording(series, rec.diagnostics, out_dir)]
+    write_json(os.path.join(out_dir, "report.json"), figures)
+    return figures
