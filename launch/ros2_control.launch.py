@@ -38,8 +38,8 @@ brakes until the first command and whenever the commands stop for the file's
 ``command_timeout`` (a few periods would be too few: on a busy machine the
 controller_manager misses 50 ms now and then, and braking the arm mid-motion under a
 running controller makes it diverge on release).  The launch shuts down when
-sim_node exits (after ``duration`` of simulated time); the other processes may stop
-alone and the rest says what it then does.  controller_node tracks while
+sim_node exits (after ``duration`` of simulated time, or ``duration:=``); the other
+processes may stop alone and the rest says what it then does.  controller_node tracks while
 effort_controller is active (``ros2_control.effort_controller``) and sim_node holds
 the arm on its brakes while it is not (``hardware.effort_controller``); when
 controller_node exits the effort controller is unspawned (deactivated and unloaded):
@@ -75,8 +75,8 @@ from visual_adaptive_servo.config.ros2_control import (
 )
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
-from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
-    rate_arguments, rates, recording_folder
+from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
+    node_parameters, rate_arguments, rates, recording_folder, sim_duration
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -131,7 +131,8 @@ def _nodes(context):
                                **rates(context), **node_parameters(context)}])
     sim_node = Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
                     parameters=[params_file, dict(hardware, **{
-                        "start.wait_for_recorder": record}, **node_parameters(context))])
+                        "start.wait_for_recorder": record}, **sim_duration(context),
+                        **node_parameters(context))])
     nodes = [
         Node(package=PACKAGE, executable="robot_description", name="robot_description",
              output="screen", parameters=[{"robot_description": description,
@@ -180,6 +181,7 @@ def generate_launch_description():
                               description="Record the package and hardware topics (MCAP)"),
         DeclareLaunchArgument("bag_dir", default_value="",
                               description="Output folder of the recording (must not exist)"),
+        duration_argument(),
         *rate_arguments(),
         *node_arguments(),
         OpaqueFunction(function=_nodes),

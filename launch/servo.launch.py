@@ -26,9 +26,10 @@ itself (its timers must run while sim time stands still, so no use_sim_time);
 controller_node uses sim time.  ``camera_mode:=rendered`` (default: the file's
 ``sim_node.camera_mode``) makes the simulator publish pictures and starts the
 feature_detector, configured by the file's ``feature_detector`` section.
-When any node exits (sim_node after ``duration`` of simulated time) the launch
-shuts down.  ``record:=true`` runs ``ros2 bag record -s mcap`` on the topics
-``vas run`` records (visual_adaptive_servo.recording.recorder.TOPICS) and sets
+When any node exits (sim_node after ``duration`` of simulated time: the file's, or
+the ``duration:=`` argument's) the launch shuts down.  ``record:=true`` runs
+``ros2 bag record -s mcap`` on the topics ``vas run`` records
+(visual_adaptive_servo.recording.recorder.TOPICS) and sets
 ``sim_node.start.wait_for_recorder``: the simulation starts once the recorder
 subscribes, and the shutdown waits ``RECORDER_GRACE`` for it to take the last
 messages.  Not ``--use-sim-time``: with it the recorder subscribes nothing
@@ -68,8 +69,9 @@ from launch.events.process import SignalProcess
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
-from visual_adaptive_servo.ros.launch_args import node_arguments, node_parameters, \
-    rate_arguments, rates, recorder_qos_overrides, recording_folder
+from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
+    node_parameters, rate_arguments, rates, recorder_qos_overrides, recording_folder, \
+    sim_duration
 
 PACKAGE = "visual_adaptive_servo"
 # s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
@@ -101,7 +103,7 @@ def _nodes(context):
              parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
                                        "render.enabled": render,
                                        "start.wait_for_recorder": record,
-                                       **node_parameters(context)}]),
+                                       **sim_duration(context), **node_parameters(context)}]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
              parameters=[params_file, controller]),
@@ -178,6 +180,7 @@ def generate_launch_description():
         DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
+        duration_argument(),
         *rate_arguments("; every sample with record:=true in lockstep"),
         *node_arguments(),
         DeclareLaunchArgument("bag_dir", default_value="",

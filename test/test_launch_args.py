@@ -21,12 +21,15 @@ pytest.importorskip("launch_ros", reason="needs ROS 2 launch (a sourced Jazzy)")
 
 from launch import LaunchContext  # noqa: E402
 
-from visual_adaptive_servo.ros.launch_args import recording_folder  # noqa: E402
+from visual_adaptive_servo.ros.launch_args import (  # noqa: E402
+    recording_folder,
+    sim_duration,
+)
 
 
-def _context(bag_dir):
+def _context(bag_dir="", duration=""):
     context = LaunchContext()
-    context.launch_configurations["bag_dir"] = bag_dir
+    context.launch_configurations.update(bag_dir=bag_dir, duration=duration)
     return context
 
 
@@ -39,3 +42,14 @@ def test_an_existing_bag_dir_is_refused_before_anything_starts(tmp_path):
         recording_folder(_context(str(tmp_path / "left")))
     assert recording_folder(_context(str(tmp_path / "new"))) == str(tmp_path / "new")
     assert recording_folder(_context("")) == ""
+
+
+def test_duration_is_the_files_unless_given_and_then_seconds_from_0():
+    assert sim_duration(_context()) == {}
+    assert sim_duration(_context(duration="2")) == {"duration": 2.0}
+    assert sim_duration(_context(duration="0.5")) == {"duration": 0.5}
+    assert sim_duration(_context(duration="0")) == {"duration": 0.0}   # for ever
+    for text in ("-1", "nan", "inf", "2s"):
+        with pytest.raises(RuntimeError, match=rf"duration:={text}: expected a number of "
+                           r"simulated seconds, 0 or more \(0: for ever\)"):
+            sim_duration(_context(duration=text))

@@ -18,6 +18,7 @@
 ``executor`` and ``realtime_priority``: how every node of ours runs (ros/main.py).
 """
 
+import math
 import os
 import tempfile
 
@@ -89,6 +90,33 @@ def recorder_qos_overrides(topics, folder=None):
     with open(handle, "w", encoding="utf-8") as stream:
         yaml.safe_dump(overrides, stream)
     return path
+
+
+def duration_argument():
+    """DeclareLaunchArgument ``duration``: sim_node's simulated seconds (:func:`sim_duration`)."""
+    return DeclareLaunchArgument(
+        "duration", default_value="",
+        description="Simulated seconds until sim_node stops and the launch shuts down, 0 for "
+                    "ever (empty: the params_file's sim_node.duration)")
+
+
+def sim_duration(context):
+    """``{"duration": seconds}`` for sim_node from the launch argument; {} when it is empty.
+
+    Refused before any process starts unless it is a number of seconds, 0 or more (0:
+    for ever, as sim_node.duration).
+    """
+    text = LaunchConfiguration("duration").perform(context)
+    if not text:
+        return {}
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0.0):
+        raise RuntimeError(f"duration:={text}: expected a number of simulated seconds, 0 or "
+                           f"more (0: for ever)")
+    return {"duration": value}
 
 
 def recording_folder(context):
