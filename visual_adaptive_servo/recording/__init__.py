@@ -20,5 +20,6 @@
   the recorded topics, CSV and JSON outputs;
 * :mod:`.summary`: the figures of summary.json and of ``vas compare`` (numpy only);
 * :mod:`.cadence`: :class:`~.cadence.RateGate`, which samples' messages a node publishes;
-* :mod:`.plots`: the PNGs of a run (matplotlib, imported only by runs that plot).
+* :mod:`.plots`: the PNGs of a run (matplotlib, imported only by runs that plot);
+* :mod:`.bag_report`: ``vas report``, the figures and plots of a recorded bag.
 """
