@@ -23,6 +23,7 @@ and topics missing.
 """
 
 import json
+import math
 import os
 
 import numpy as np
@@ -116,8 +117,11 @@ def test_frames_are_judged_at_their_capture_time(tmp_path):
         figures["final_rms_frame_error_px"], abs=1e-3)
 
 
-def _rewrite(source, folder, storage, shift_ns=None, keep=None):
-    """The messages of ``source`` in a new rosbag2 ``folder``; receive times moved by topic."""
+def _rewrite(source, folder, storage, shift_ns=None, keep=None, drop=None):
+    """The messages of ``source`` in a new rosbag2 ``folder``; receive times moved by topic.
+
+    ``drop(topic, k)``: leave out the k-th message of the topic.
+    """
     writer = Writer(folder, version=8, storage_plugin=storage)
     writer.open()
     typestore = m.rosbags_messages().typestore
@@ -127,8 +131,10 @@ def _rewrite(source, folder, storage, shift_ns=None, keep=None):
             if keep is None or conn.topic in keep:
                 out[conn.id] = writer.add_connection(conn.topic, conn.msgtype,
                                                      typestore=typestore)
+        seen = {}
         for conn, time, raw in reader.messages():
-            if conn.id in out:
+            k = seen[conn.topic] = seen.get(conn.topic, -1) + 1
+            if conn.id in out and not (drop and drop(conn.topic, k)):
                 writer.write(out[conn.id], time + (shift_ns or {}).get(conn.topic, 0), raw)
     writer.close()
     return folder
@@ -182,15 +188,19 @@ def test_gaps_warnings_and_missing_topics_are_reported(tmp_path):
     assert figures["joint_states"] == len(stamps)
     assert figures["joint_states_largest_gap_s"] == pytest.approx(0.041, abs=1e-6)
     assert figures["joint_states_largest_gap_at_s"] == pytest.approx(0.54, abs=1e-6)
-    problems = figures["diagnostics"]["controller_node"]
-    assert problems["count"] == {"OK": 2, "WARN": 1, "ERROR": 1}
-    assert problems["first_problem"]["t"] == pytest.approx(0.3, abs=1e-6)
-    assert problems["first_problem"]["message"] == "feature x: no camera frame for 0.1 s"
-    assert problems["last_problem"]["level"] == "ERROR"
+    assert figures["time_origin"] == "the first joint state"     # a wall clock's stamps
+    status = figures["diagnostics"]["controller_node"]
+    assert status["count"] == {"OK": 2, "WARN": 1, "ERROR": 1}
+    # one problem from the WARN to the next OK, at its worst level
+    [problem] = status["problems"]
+    assert problem["start"] == pytest.approx(0.3, abs=1e-6)
+    assert problem["end"] == pytest.approx(0.6, abs=1e-6)
+    assert (problem["level"], problem["message"]) == ("ERROR", "input bad or stale")
     assert "/controller_node/tracking_error" in figures["missing"]
     assert "final_rms_frame_error_px" not in figures
     text = "\n".join(report_lines(figures))
-    assert "largest gap 41.0 ms" in text and "first WARN at t=0.300 s" in text
+    assert "largest gap 41.0 ms" in text
+    assert "1 problem: ERROR t=0.300-0.600 s: input bad or stale" in text
     assert "not in the bag: /camera/features" in text
     written = write_report(read_bag(folder), tmp_path / "report")
     assert written["outputs"] == ["report.json", "timing.png", "diagnostics.png"]
@@ -225,3 +235,77 @@ def test_a_bag_without_the_package_topics_is_refused_by_name(tmp_path):
     writer.close()
     with pytest.raises(BagError, match=r"none of the package's topics.*\['/chatter'\]"):
         read_bag(tmp_path / "other")
+
+
+def test_a_simulators_times_stay_its_own_when_the_recorder_missed_the_start(
+        noisy_run, tmp_path):
+    out, summary = noisy_run
+    folder = _rewrite(out / "run.mcap", tmp_path / "late", StoragePlugin.MCAP,
+                      drop=lambda topic, k: k < 10)
+    figures = bag_figures(read_bag(folder))
+    assert figures["time_origin"] == "simulated time"
+    assert figures["start_s"] == pytest.approx(0.050)           # the 11th period, not 0
+    assert figures["end_s"] == pytest.approx(2.0 - 0.005)
+    assert figures["joint_states_first_at_s"] == pytest.approx(0.050)
+
+
+def test_a_stall_shows_in_the_receive_times_and_missing_commands_are_counted(
+        noisy_run, tmp_path):
+    """A controller that stops answering for 20 periods while the simulator's stamps go on."""
+    out, _ = noisy_run
+    stall = range(100, 120)
+
+    def drop(topic, k):
+        return topic == "/controller_node/effort_command" and k in stall
+
+    folder = _rewrite(out / "run.mcap", tmp_path / "stalled", StoragePlugin.MCAP,
+                      drop=drop)
+    figures = bag_figures(read_bag(folder))
+    assert figures["joint_states_without_command"] == len(stall)
+    assert figures["commands"] == 400 - len(stall)
+    assert figures["commands_largest_gap_s"] == pytest.approx(0.005 * (len(stall) + 1))
+    assert figures["commands_largest_gap_at_s"] == pytest.approx(0.005 * stall[-1] + 0.005)
+    # the recorder's clock: a sim that stalls 0.5 s of wall time after its 200th period
+    rec = read_bag(out / "run.mcap")
+    late = rec.signals["/joint_states"].received >= rec.signals["/joint_states"].received[200]
+    rec.signals["/joint_states"].received[late] += 500_000_000
+    figures = bag_figures(rec)
+    assert figures["joint_states_largest_gap_s"] == pytest.approx(0.005)   # stamps regular
+    assert figures["joint_states_largest_received_gap_s"] == pytest.approx(0.505)
+    assert figures["joint_states_largest_received_gap_at_s"] == pytest.approx(1.0)
+    assert "as received, largest gap 505.0 ms (before t=1.000 s)" in "\n".join(
+        report_lines(figures))
+
+
+def test_unfinished_and_empty_bags_and_a_bad_window_are_refused_by_name(noisy_run, tmp_path):
+    out, _ = noisy_run
+    running = tmp_path / "running"
+    running.mkdir()
+    (running / "running_0.mcap").write_bytes((out / "run.mcap").read_bytes()[:5000])
+    with pytest.raises(BagError, match=r"no metadata.yaml beside \['running_0.mcap'\]: the "
+                       r"recording has not finished.*ros2 bag reindex"):
+        read_bag(running)
+    with pytest.raises(BagError, match=r"the file was not closed.*ros2 bag reindex"):
+        read_bag(running / "running_0.mcap")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BagError, match=r"not a rosbag2 \(no metadata.yaml, no .mcap or .db3"):
+        read_bag(tmp_path / "empty")
+    rec = read_bag(out / "run.mcap")
+    for window in (0.0, -1.0, math.nan):
+        with pytest.raises(BagError, match="window: expected a positive number of seconds"):
+            bag_figures(rec, window)
+    with pytest.raises(SystemExit):
+        main(["report", str(out / "run.mcap"), "--window", "0"])
+    # a window longer than the run is the whole run, and says so
+    figures = bag_figures(rec, window=30.0)
+    assert figures["window_s"] == pytest.approx(figures["duration_s"])
+    assert "over the whole run (1.995 s)" in "\n".join(report_lines(figures))
+
+
+def test_the_default_output_folder_is_the_bags_name_whole(noisy_run, tmp_path):
+    out, _ = noisy_run
+    for name in ("run.2026.12.07", "run.2026.12.08"):
+        _rewrite(out / "run.mcap", tmp_path / name, StoragePlugin.MCAP)
+        assert main(["report", str(tmp_path / name)]) == 0
+        report = json.loads((tmp_path / f"{name}_report" / "report.json").read_text())
+        assert report["bag"] == str(tmp_path / name)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 
 from .campaigns.campaign import add_parser as add_campaign_parser
@@ -45,6 +46,16 @@ def _floats(text):
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected comma-separated numbers, got {text!r}") from None
+
+
+def _positive(text):
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
 
 
 def _run_overrides(args):
@@ -119,7 +130,8 @@ def cmd_report(args):
     from .recording.bag_report import BagError, read_bag, report_lines, write_report
 
     bag = os.path.normpath(args.bag)
-    out = args.out or f"{os.path.splitext(bag)[0]}_report"
+    stem, suffix = os.path.splitext(bag)
+    out = args.out or f"{stem if suffix in ('.mcap', '.db3') else bag}_report"
     try:
         figures = write_report(read_bag(bag), out, args.window)
     except BagError as exc:
@@ -178,8 +190,8 @@ def build_parser():
                         "record) or .mcap file")
     report.add_argument("--out", help="output folder for report.json and the PNGs (default: "
                         "BAG_report beside the bag)")
-    report.add_argument("--window", type=float, default=5.0, metavar="S",
-                        help="final_rms_error_px over the last S seconds (default 5, as "
+    report.add_argument("--window", type=_positive, default=5.0, metavar="S",
+                        help="the final RMS errors over the last S seconds (default 5, as "
                         "vas run's summary.json)")
     report.set_defaults(func=cmd_report)
     add_compare_parser(sub)

@@ -29,10 +29,14 @@ noise, and the figures are of the error the controller published
 ``final_rms_error_px`` is.  ``final_depth_error`` needs the simulator's
 ``/sim_node/true_depth``.
 
-Times are header stamps, in seconds from the first joint state.  A
-Float64MultiArray has no header: it gets the stamp of the message its node
-published with it (``~/observed`` for the controller's, ``/joint_states`` for
-the simulator's), matched by the time the recorder received them.
+Times are header stamps in seconds: as they are when they are simulated time
+(under 10^6 s: a simulator's clock starts at 0), else from the first joint
+state (a real arm's wall clock).  A Float64MultiArray has no header: it gets
+the stamp of the message its node published with it (``~/observed`` for the
+controller's, ``/joint_states`` for the simulator's), matched by the time the
+recorder received them.  Those receive times (the recorder's clock) also give
+each topic's largest gap as the recorder saw it: a simulator or controller
+that stalls in real time keeps its stamps regular, not its arrivals.
 """
 
 from __future__ import annotations
@@ -60,8 +64,11 @@ PARAMETERS = f"{CONTROLLER_NS}/parameters"
 EFFORT_COMMAND = f"{CONTROLLER_NS}/effort_command"
 DIAGNOSTICS = "/diagnostics"
 # the unstamped arrays and the stamped topic published with each (see the module docstring)
-STAMPED_WITH = {ESTIMATED_DEPTH: OBSERVED, PARAMETERS: OBSERVED, TRUE_DEPTH: JOINT_STATES,
-                COMMANDS: EFFORT_COMMAND}
+# (the first of them in the bag; a bag recorded without it: the next)
+STAMPED_WITH = {ESTIMATED_DEPTH: (OBSERVED, TRACKING_ERROR, JOINT_STATES),
+                PARAMETERS: (OBSERVED, TRACKING_ERROR, JOINT_STATES),
+                TRUE_DEPTH: (JOINT_STATES,), COMMANDS: (EFFORT_COMMAND, JOINT_STATES)}
+SIMULATED_BELOW_NS = 10 ** 15    # stamps under 10^6 s are simulated time (they start at 0)
 READ = (JOINT_STATES, FEATURES, COMMANDS, TRUE_DEPTH, DESIRED, OBSERVED, TRACKING_ERROR,
         ESTIMATED_DEPTH, PARAMETERS, EFFORT_COMMAND, DIAGNOSTICS)
 # plots.plot_recording's names of the topics
@@ -93,7 +100,7 @@ class Recording:
     signals: dict
     diagnostics: list            # (t [s], name, level name, message), in the bag's order
     counts: dict                 # every topic of the bag, read or not
-    t0_ns: int                   # the first joint state's stamp (else the first stamp)
+    t0_ns: int                   # time 0: 0 for simulated time, else the first joint state
 
 
 def _values(topic, msg, joint_names):
@@ -129,8 +136,6 @@ def _stack(topic, rows, t0_ns):
 
 def _stamp_by_partner(signal, partner):
     """Stamps for an unstamped signal: those of ``partner``'s messages received nearest."""
-    if partner is None:
-        return
     order = np.argsort(partner.received, kind="stable")
     received = partner.received[order]
     at = np.searchsorted(received, signal.received)
@@ -138,6 +143,18 @@ def _stamp_by_partner(signal, partner):
     nearest = np.where(np.abs(received[lo] - signal.received)
                        <= np.abs(received[hi] - signal.received), lo, hi)
     signal.t = partner.t[order][nearest]
+
+
+def _refuse_unfinished(path):
+    """A folder without metadata.yaml: a recording not finished, or not a bag at all."""
+    if not path.is_dir() or (path / "metadata.yaml").exists():
+        return
+    files = sorted(f.name for f in path.iterdir() if f.suffix in (".mcap", ".db3"))
+    if files:
+        raise BagError(f"{path}: no metadata.yaml beside {files}: the recording has not "
+                       f"finished (ros2 bag record writes it when it stops), or was killed "
+                       f"(ros2 bag reindex {path} writes it)")
+    raise BagError(f"{path}: not a rosbag2 (no metadata.yaml, no .mcap or .db3 file in it)")
 
 
 def read_bag(path):
@@ -156,12 +173,16 @@ def read_bag(path):
                                 f"file)")
     rows = {topic: [] for topic in READ}
     diagnostics, joint_names = [], {}
+    _refuse_unfinished(path)
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
         reader.open()
     except Exception as exc:  # noqa: BLE001 -- rosbags raises its own kinds, named here
+        hint = (": the file was not closed (a recording still running, or one that was "
+                "killed): stop ros2 bag record, or rebuild its index with ros2 bag reindex"
+                if "magic" in str(exc).lower() else "")
         raise BagError(f"{path}: not a readable rosbag2 (a ros2 bag record folder or an "
-                       f".mcap file): {type(exc).__name__}: {exc}") from exc
+                       f".mcap file){hint}: {type(exc).__name__}: {exc}") from exc
     try:
         counts = {}
         for connection in reader.connections:
@@ -181,7 +202,9 @@ def read_bag(path):
     finally:
         reader.close()
     stamps = [row[0] for found in rows.values() for row in found if row[0] is not None]
-    if rows[JOINT_STATES]:
+    if stamps and min(stamps) < SIMULATED_BELOW_NS:
+        t0_ns = 0
+    elif rows[JOINT_STATES]:
         t0_ns = rows[JOINT_STATES][0][0]
     elif stamps:
         t0_ns = min(stamps)
@@ -190,28 +213,39 @@ def read_bag(path):
                        f"{sorted(counts) or 'no topic'}); expected {JOINT_STATES}, "
                        f"{TRACKING_ERROR} and the others of servo.launch.py record:=true")
     signals = {topic: _stack(topic, found, t0_ns) for topic, found in rows.items() if found}
-    for topic, partner in STAMPED_WITH.items():
-        if topic in signals:
-            _stamp_by_partner(signals[topic], signals.get(partner))
+    for topic, partners in STAMPED_WITH.items():
+        found = [signals[partner] for partner in partners if partner in signals]
+        if topic in signals and found:
+            _stamp_by_partner(signals[topic], found[0])
     return Recording(str(path), signals,
                      [((ns - t0_ns) * 1e-9, *rest) for ns, *rest in diagnostics], counts, t0_ns)
 
 
-def _gaps(t):
-    """(mean rate [Hz], median and largest interval [s], where the largest ends [s])."""
+def timing_figures(key, signal):
+    """A topic's count, rate and gaps, by its stamps and by the recorder's receive times.
+
+    ``<key>_largest_gap_s`` and ``_at_s`` (where it ends) from the stamps in order;
+    ``<key>_largest_received_gap_s`` and ``_at_s`` (the stamp of the message after it)
+    from the receive times.
+    """
+    order = np.argsort(signal.t, kind="stable")
+    t = signal.t[order]
+    figures = {key: len(t), f"{key}_first_at_s": float(t[0]), f"{key}_last_at_s": float(t[-1])}
     if len(t) < 2:
-        return math.nan, math.nan, math.nan, math.nan
+        return figures
     steps = np.diff(t)
     k = int(np.argmax(steps))
     span = t[-1] - t[0]
-    return ((len(t) - 1) / span if span > 0 else math.inf), float(np.median(steps)), \
-        float(steps[k]), float(t[k + 1])
-
-
-def _joint_columns(signal, part):
-    """The (N, n) block ``part`` (0 position, 1 velocity, 2 effort) of a JointState signal."""
-    n = len(signal.labels)
-    return signal.values[:, part * n:(part + 1) * n]
+    arrived = np.argsort(signal.received, kind="stable")
+    waits = np.diff(signal.received[arrived]) * 1e-9
+    j = int(np.argmax(waits))
+    figures.update({
+        f"{key}_rate_hz": (len(t) - 1) / span if span > 0 else math.inf,
+        f"{key}_median_interval_s": float(np.median(steps)),
+        f"{key}_largest_gap_s": float(steps[k]), f"{key}_largest_gap_at_s": float(t[k + 1]),
+        f"{key}_largest_received_gap_s": float(waits[j]),
+        f"{key}_largest_received_gap_at_s": float(signal.t[arrived][j + 1])})
+    return figures
 
 
 def bag_figures(rec, window=RMS_WINDOW_S):
@@ -220,19 +254,23 @@ def bag_figures(rec, window=RMS_WINDOW_S):
     ``window``: final_rms_error_px is over the last ``window`` seconds, up to the
     last joint state (the last stamp of any kind without one).
     """
+    if not (window > 0.0 and math.isfinite(window)):
+        raise BagError(f"window: expected a positive number of seconds, got {window}")
     sig = rec.signals
     times = {topic: s.t for topic, s in sig.items()}
-    ends = [t[np.isfinite(t)].max() for t in times.values() if np.isfinite(t).any()]
-    end = float(times[JOINT_STATES][-1]) if JOINT_STATES in sig else max(ends)
-    figures = {"bag": rec.path, "duration_s": end, "window_s": window,
+    stamped = [t[np.isfinite(t)] for t in times.values() if np.isfinite(t).any()]
+    start = float(times[JOINT_STATES][0]) if JOINT_STATES in sig else min(t.min() for t in stamped)
+    end = float(times[JOINT_STATES][-1]) if JOINT_STATES in sig else max(t.max() for t in stamped)
+    figures = {"bag": rec.path, "time_origin": "simulated time" if rec.t0_ns == 0
+               else "the first joint state", "start_s": start, "end_s": end,
+               "duration_s": end - start, "window_s": min(window, end - start),
                "messages": dict(sorted(rec.counts.items())),
                "missing": [topic for topic in READ if topic not in rec.counts]}
-    for topic, key in ((JOINT_STATES, "joint_states"), (FEATURES, "camera_frames")):
-        if topic in sig:
-            rate, median, gap, at = _gaps(np.sort(times[topic]))
-            figures.update({f"{key}": len(times[topic]), f"{key}_rate_hz": rate,
-                            f"{key}_median_interval_s": median, f"{key}_largest_gap_s": gap,
-                            f"{key}_largest_gap_at_s": at})
+    command_topic = EFFORT_COMMAND if EFFORT_COMMAND in sig else COMMANDS
+    for topic, key in ((JOINT_STATES, "joint_states"), (FEATURES, "camera_frames"),
+                       (command_topic, "commands")):
+        if topic in sig and np.isfinite(sig[topic].t).all():
+            figures.update(timing_figures(key, sig[topic]))
     if FEATURES in sig and DESIRED in sig:
         t, err = frame_errors(times[FEATURES], sig[FEATURES].values, times[DESIRED],
                               sig[DESIRED].values)
@@ -252,6 +290,10 @@ def bag_figures(rec, window=RMS_WINDOW_S):
                 command.labels, np.nanmax(np.abs(tau), axis=0).tolist()))
         if JOINT_STATES in sig:
             figures["commands_per_joint_state"] = len(tau) / len(times[JOINT_STATES])
+        if JOINT_STATES in sig and command_topic == EFFORT_COMMAND:
+            # each command is stamped with the joint state it answers
+            figures["joint_states_without_command"] = int(np.count_nonzero(~np.isin(
+                np.round(times[JOINT_STATES], 9), np.round(command.t, 9))))
     if ESTIMATED_DEPTH in sig:
         z_hat = sig[ESTIMATED_DEPTH].values
         figures["min_estimated_depth"] = float(np.nanmin(z_hat))
@@ -294,47 +336,83 @@ def _error_figures(kind, t, err, end, window):
 
 
 def diagnostics_figures(statuses):
-    """Per status name: messages by level, and the first and last that were not OK."""
+    """Per status name: its messages by level, and its problems.
+
+    A problem runs from a message that is not OK to the next OK one (``end`` None: it
+    lasted to the end of the bag); it has its worst level and that level's first message.
+    """
     out = {}
-    for t, name, level, message in statuses:
-        entry = out.setdefault(name, {"count": {}, "first_problem": None, "last_problem": None})
+    for t, name, level, message in sorted(statuses, key=lambda status: status[0]):
+        entry = out.setdefault(name, {"count": {}, "problems": []})
         entry["count"][level] = entry["count"].get(level, 0) + 1
-        if level != "OK":
-            problem = {"t": t, "level": level, "message": message}
-            entry["first_problem"] = entry["first_problem"] or problem
-            entry["last_problem"] = problem
+        problems = entry["problems"]
+        open_ = problems[-1] if problems and problems[-1]["end"] is None else None
+        if level == "OK":
+            if open_ is not None:
+                open_["end"] = t
+        elif open_ is None:
+            problems.append({"start": t, "end": None, "level": level, "message": message})
+        elif (m.DIAGNOSTIC_LEVELS.get(level, 3)
+              > m.DIAGNOSTIC_LEVELS.get(open_["level"], 3)):
+            open_.update(level=level, message=message)
     return out
+
+
+SHOWN_PROBLEMS = 3    # per status, in the printed report (report.json has them all)
+
+
+def _ms(seconds):
+    return f"{1e3 * seconds:.1f} ms"
 
 
 def report_lines(figures):
     """The report as a few lines of text, for the terminal."""
-    lines = [f"{figures['bag']}: {figures['duration_s']:.3f} s"]
-    for key, what in (("joint_states", "joint states"), ("camera_frames", "camera frames")):
-        if key in figures:
-            gap, median = figures[f"{key}_largest_gap_s"], figures[f"{key}_median_interval_s"]
-            timing = (f"largest gap {1e3 * gap:.1f} ms (ending at "
-                      f"t={figures[f'{key}_largest_gap_at_s']:.3f} s), median "
-                      f"{1e3 * median:.1f} ms" if gap > 1.5 * median
-                      else f"intervals regular (largest {1e3 * gap:.1f} ms)")
-            lines.append(f"{what}: {figures[key]} at {figures[f'{key}_rate_hz']:.1f} Hz, "
-                         f"{timing}")
+    lines = [f"{figures['bag']}: {figures['duration_s']:.3f} s, t={figures['start_s']:.3f} "
+             f"to {figures['end_s']:.3f} s ({figures['time_origin']})"]
+    for key, what in (("joint_states", "joint states"), ("camera_frames", "camera frames"),
+                      ("commands", "commands")):
+        if f"{key}_rate_hz" not in figures:
+            continue
+        gap, median = figures[f"{key}_largest_gap_s"], figures[f"{key}_median_interval_s"]
+        stamps = (f"largest gap {_ms(gap)} (ending at t={figures[f'{key}_largest_gap_at_s']:.3f}"
+                  f" s), median {_ms(median)}" if gap > 1.5 * median
+                  else f"intervals regular (largest {_ms(gap)})")
+        received = figures[f"{key}_largest_received_gap_s"]
+        lines.append(f"{what}: {figures[key]} at {figures[f'{key}_rate_hz']:.1f} Hz, {stamps}; "
+                     f"as received, largest gap {_ms(received)} (before "
+                     f"t={figures[f'{key}_largest_received_gap_at_s']:.3f} s)")
+    if "joint_states_without_command" in figures:
+        lines.append(f"joint states without a command answering them: "
+                     f"{figures['joint_states_without_command']} of {figures['joint_states']}")
+    span = (f"the last {figures['window_s']:g} s"
+            if figures["window_s"] < figures["duration_s"] - 1e-9
+            else f"the whole run ({figures['window_s']:.3f} s)")
     for kind, what in (("frame", "camera frames - x_d at their capture (noise included)"),
                        ("tracking", "~/tracking_error, the law's x - x_d")):
         if f"final_rms_{kind}_error_px" in figures:
-            lines.append(f"{what}: RMS {figures[f'final_rms_{kind}_error_px']:.4g} px over "
-                         f"the last {figures['window_s']:g} s, largest "
-                         f"{figures[f'max_{kind}_error_px']:.4g} px at "
-                         f"t={figures[f'max_{kind}_error_at_s']:.3f} s")
+            lines.append(f"{what}: largest point error RMS "
+                         f"{figures[f'final_rms_{kind}_error_px']:.4g} px over {span}, at most "
+                         f"{figures[f'max_{kind}_error_px']:.4g} px (t="
+                         f"{figures[f'max_{kind}_error_at_s']:.3f} s)")
     if "max_abs_torque" in figures:
         lines.append(f"largest commanded torque: {figures['max_abs_torque']:.4g} N m")
     if "final_depth_error" in figures:
-        lines.append(f"depth estimate - true depth at the end: {figures['final_depth_error']}")
+        error = np.atleast_1d(figures["final_depth_error"])
+        lines.append("depth estimate - true depth at the end: "
+                     + ", ".join(f"{e:+.4f}" for e in error) + " m")
     for name, entry in figures["diagnostics"].items():
-        problem = entry["first_problem"]
-        if problem is not None:
-            counts = ", ".join(f"{n} {level}" for level, n in entry["count"].items())
-            lines.append(f"diagnostics {name!r} ({counts}): first {problem['level']} at "
-                         f"t={problem['t']:.3f} s: {problem['message']}")
+        problems = entry["problems"]
+        if not problems:
+            continue
+        counts = ", ".join(f"{n} {level}" for level, n in entry["count"].items())
+        shown = "; ".join(
+            f"{p['level']} t={p['start']:.3f}-"
+            f"{'end' if p['end'] is None else format(p['end'], '.3f')} s: {p['message']}"
+            for p in problems[:SHOWN_PROBLEMS])
+        more = (f" (and {len(problems) - SHOWN_PROBLEMS} more in report.json)"
+                if len(problems) > SHOWN_PROBLEMS else "")
+        lines.append(f"diagnostics {name!r} ({counts}): {len(problems)} "
+                     f"problem{'s' if len(problems) > 1 else ''}: {shown}{more}")
     if figures["missing"]:
         lines.append(f"not in the bag: {', '.join(figures['missing'])}")
     return lines
@@ -345,11 +423,16 @@ def write_report(rec, out_dir, window=RMS_WINDOW_S):
     from .plots import plot_recording
     from .recorder import write_json
 
-    os.makedirs(out_dir, exist_ok=True)
     figures = bag_figures(rec, window)
+    os.makedirs(out_dir, exist_ok=True)
     series = {key: (rec.signals[topic].t, rec.signals[topic].values,
                     rec.signals[topic].labels)
               for key, topic in PLOTTED.items() if topic in rec.signals}
+    if "observed" in series and "desired" in series:
+        # x_o before the controller's first x_d (before a late camera's first frame) is 0
+        t, values, labels = series["observed"]
+        kept = t >= series["desired"][0][0] - 1e-9
+        series["observed"] = (t[kept], values[kept], labels)
     if FEATURES in rec.signals and DESIRED in rec.signals:
         t, err = frame_errors(rec.signals[FEATURES].t, rec.signals[FEATURES].values,
                               rec.signals[DESIRED].t, rec.signals[DESIRED].values)

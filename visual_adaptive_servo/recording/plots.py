@@ -111,7 +111,10 @@ def _plot_image_path(out_dir, x_d, x_obs, x_meas=None, x_true=None):
         u, v = 2 * i, 2 * i + 1
         first = i == 0
         if x_meas is not None and len(x_meas):
-            ax.plot(x_meas[:, u], x_meas[:, v], ".", ms=1, alpha=0.3, color="tab:orange",
+            # a frame at every sample is a cloud; a 30 Hz camera's frames are dots to see
+            sparse = np.count_nonzero(np.isfinite(x_meas[:, u])) < 2000
+            ax.plot(x_meas[:, u], x_meas[:, v], ".", ms=3 if sparse else 1,
+                    alpha=0.6 if sparse else 0.3, color="tab:orange",
                     label="x measured" if first else None)
         if x_true is not None:
             ax.plot(x_true[:, u], x_true[:, v], lw=1, color="tab:orange",
@@ -203,21 +206,31 @@ def plot_recording(series, diagnostics, out_dir):
 
 
 def _plot_timing(series, out_dir):
-    """timing.png: the interval before each joint state, command and camera frame [ms]."""
+    """timing.png: the interval before each joint state, command and camera frame [ms].
+
+    One panel each, so that none hides another; a log scale only where the intervals
+    span more than a factor of 10.
+    """
     shown = [(key, label) for key, label in (("joint_states", "joint states"),
                                              ("torque", "commands"),
                                              ("features", "camera frames"))
-             if key in series and len(series[key][0]) > 1]
+             if key in series and len(series[key][0]) > 1
+             and np.isfinite(series[key][0]).all()]
     if not shown:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for key, label in shown:
+    fig, axes = plt.subplots(len(shown), 1, figsize=(7, 1.2 + 1.8 * len(shown)), sharex=True,
+                             squeeze=False)
+    for ax, (key, label) in zip(axes[:, 0], shown):
         t = np.sort(series[key][0])
-        ax.semilogy(t[1:], np.maximum(np.diff(t), 1e-6) * 1e3, ".", ms=2, label=label)
-    ax.set(xlabel="time [s]", ylabel="interval since the previous one [ms]",
-           title="Timing: intervals between stamps")
-    ax.grid(True, which="both", alpha=0.4)
-    ax.legend()
+        steps = np.diff(t) * 1e3
+        ax.plot(t[1:], steps, ".", ms=2)
+        if steps.max() > 10 * max(steps.min(), 1e-6):
+            ax.set_yscale("log")
+        else:
+            ax.set_ylim(0.0, 1.2 * steps.max())
+        ax.set(ylabel="[ms]", title=f"{label}: interval since the previous stamp")
+        ax.grid(True, which="both", alpha=0.4)
+    axes[-1, 0].set_xlabel("time [s]")
     return _save(fig, os.path.join(out_dir, "timing.png"))
 
 
