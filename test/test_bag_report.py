@@ -309,3 +309,18 @@ def test_the_default_output_folder_is_the_bags_name_whole(noisy_run, tmp_path):
         assert main(["report", str(tmp_path / name)]) == 0
         report = json.loads((tmp_path / f"{name}_report" / "report.json").read_text())
         assert report["bag"] == str(tmp_path / name)
+
+
+def test_a_real_arms_subset_stamps_its_commands_by_the_joint_states(noisy_run, tmp_path):
+    """Only /joint_states and /effort_controller/commands (no stamped copy of the commands)."""
+    out, summary = noisy_run
+    folder = _rewrite(out / "run.mcap", tmp_path / "subset", StoragePlugin.MCAP,
+                      keep={"/joint_states", "/effort_controller/commands"})
+    rec = read_bag(folder)
+    np.testing.assert_array_equal(rec.signals["/effort_controller/commands"].t,
+                                  rec.signals["/joint_states"].t)
+    figures = bag_figures(rec)
+    assert figures["commands"] == figures["joint_states"] == summary["steps"]
+    assert figures["max_abs_torque"] == summary["max_abs_torque"]
+    assert "joint_states_without_command" not in figures    # unstamped: not matched by stamp
+    assert "/controller_node/effort_command" in figures["missing"]
