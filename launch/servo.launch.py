@@ -38,7 +38,7 @@ before /clock has moved, i.e. after the start; the bag's receive times are
 wall time, the messages' header stamps simulated time.  With the rendered
 camera the pictures are recorded too (recording.CAMERA_TOPICS), zstd-compressed
 by the MCAP storage (``--storage-preset-profile zstd_fast``), as ``vas run``
-records them (LZ4 there).
+records them (LZ4 there), unless ``record_pictures:=false``.
 
 controller_node publishes its commands at every sample and its other topics at
 ``publish_rate`` and /diagnostics at ``diagnostics_rate`` (empty: the node's
@@ -92,6 +92,7 @@ def _nodes(context):
     timing_mode = LaunchConfiguration("timing_mode").perform(context)
     render = LaunchConfiguration("render").perform(context) == "true"
     record = LaunchConfiguration("record").perform(context) == "true"
+    record_pictures = LaunchConfiguration("record_pictures").perform(context) == "true"
     camera_mode = (LaunchConfiguration("camera_mode").perform(context)
                    or _file_camera_mode(params_file))
     controller = {"timing_mode": timing_mode, "use_sim_time": True,
@@ -104,6 +105,7 @@ def _nodes(context):
              parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
                                        "render.enabled": render,
                                        "start.wait_for_recorder": record,
+                                       "start.recorder_takes_pictures": record_pictures,
                                        **sim_duration(context), **node_parameters(context)}]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
@@ -143,7 +145,7 @@ def _nodes(context):
             cmd += ["--qos-profile-overrides-path", overrides]
             actions.append(RegisterEventHandler(OnShutdown(
                 on_shutdown=lambda event, context, path=overrides: _remove(path))))
-        if camera_mode == "rendered":
+        if camera_mode == "rendered" and record_pictures:
             topics += sorted(CAMERA_TOPICS)
             cmd += ["--storage-preset-profile", "zstd_fast"]
         cmd += ["--topics"] + topics
@@ -181,6 +183,10 @@ def generate_launch_description():
         DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
                               description="Record the package topics with ros2 bag (MCAP); "
                                           "the simulation starts once the recorder listens"),
+        DeclareLaunchArgument("record_pictures", default_value="true",
+                              choices=["true", "false"],
+                              description="With record:=true and the rendered camera: record "
+                                          "/camera/image_raw and /camera/camera_info too"),
         duration_argument(),
         *rate_arguments("; every sample with record:=true in lockstep"),
         *node_arguments(),

@@ -591,3 +591,23 @@ def test_the_controller_node_logs_the_core_s_info_lines_and_restores_the_level(c
     assert core.level == before
     err = capfd.readouterr().err
     assert err.count("start-up report:") == 1 and "departures from the paper" in err
+
+
+@pytest.mark.parametrize("pictures", [True, False])
+def test_a_recorded_rendered_start_waits_on_the_pictures_only_if_they_are_recorded(
+        context, pictures):
+    # servo.launch.py record_pictures:=false: a recorder without the picture topics; the
+    # simulator waited for it on them until Ctrl-C
+    sections = _sections(sim_node__camera_mode="rendered",
+                         sim_node__start_DOT_wait_for_recorder=True,
+                         sim_node__start_DOT_recorder_takes_pictures=pictures)
+    sim = SimNode(context=context, parameter_overrides=_overrides(SIM_PARAMS,
+                                                                  sections[SIM_SECTION]))
+    try:
+        missing = " ".join(sim._missing())
+    finally:
+        sim.destroy_node()
+    assert ("/camera/image_raw (0 of 2 subscribers)" in missing) == pictures
+    assert ("/camera/camera_info (0 of 1 subscribers)" in missing) == pictures
+    assert pictures or "/camera/image_raw (0 of 1 subscribers)" in missing   # the detector's
+    assert "/joint_states (0 of 2 subscribers)" in missing

@@ -161,6 +161,10 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
               "Start only once every recorded topic (visual_adaptive_servo.recording.recorder."
               "TOPICS) has a subscriber and /joint_states, /clock and the features have two "
               "(the controller's and a recorder's); ros2 launch sets it with record:=true."),
+    ParamSpec("start.recorder_takes_pictures", True, "bool",
+              "With start.wait_for_recorder and camera_mode rendered: wait for the recorder on "
+              "/camera/image_raw and /camera/camera_info too (servo.launch.py "
+              "record_pictures:=false sets it false)."),
     ParamSpec("render.enabled", False, "bool", "Publish the camera view on ~/image."),
     ParamSpec("render.rate", 10.0, "float", "Rendering rate [Hz].", 0.1, 60.0),
     ParamSpec("render.width", 320, "int", "Rendered image width [px].", 16, 1920),

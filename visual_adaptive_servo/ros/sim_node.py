@@ -60,7 +60,8 @@ The simulation starts once a controller is connected (it publishes the command
 and subscribes /joint_states and the frame topic; in rendered mode a detector
 too), with ``start.wait_for_recorder`` also once a recorder subscribes every
 topic of :data:`visual_adaptive_servo.recording.recorder.TOPICS` (and /joint_states,
-/clock and /camera/features have two subscribers), then after ``START_SETTLE``
+/clock and /camera/features have two subscribers; in rendered mode the pictures too,
+unless ``start.recorder_takes_pictures`` is false), then after ``START_SETTLE``
 more, so the other processes have matched each other too: the arm does not
 fall meanwhile and the recording misses no period.  (A recorder with ``--use-sim-time``
 subscribes nothing before /clock has moved, so it cannot be waited for.)
@@ -307,7 +308,9 @@ class SimNode(Node):
             need.update({"/joint_states": 2, "/clock": 2, "/camera/features": 2})
         if self.rendered:
             need["/camera/image_raw"] = 1
-            if self.config["start.wait_for_recorder"]:     # the detector's and the recorder's
+            if (self.config["start.wait_for_recorder"]
+                    and self.config["start.recorder_takes_pictures"]):
+                # the detector's and the recorder's
                 need.update({"/camera/image_raw": 2, "/camera/camera_info": 1})
         names = {"/joint_states": self.state_topic}
         missing = [f"{names.get(topic, topic)} ({count} of {need[topic]} subscribers)"
