@@ -92,14 +92,17 @@ def _plot_torques(t, tau, out_dir, names=()):
 
 def _plot_parameters(t, groups, out_dir):
     """parameters.png: one panel per (title, entry names, values (N, p)) of ``groups``."""
-    fig, axes = plt.subplots(len(groups), 1, figsize=(7, 8), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(len(groups), 1, figsize=(9, 8), sharex=True, squeeze=False)
+    styles = ("-", "--", ":")      # past the 10 colours of the cycle, a line style tells them
     for ax, (title, names, values) in zip(axes[:, 0], groups):
         for i, name in enumerate(names):
-            ax.plot(t, values[:, i], label=name, lw=0.8)
+            ax.plot(t, values[:, i], styles[(i // 10) % 3], label=name, lw=0.8)
         ax.set(ylabel="estimate", title=f"{title}, {len(names)} entries")
         ax.grid(True)
         if len(names) <= 12:
-            ax.legend(fontsize=7, ncol=4)
+            # beside the panel, not over its curves
+            ax.legend(fontsize=6, ncol=1 + len(names) // 7, loc="upper left",
+                      bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     axes[-1, 0].set_xlabel("time [s]")
     return _save(fig, os.path.join(out_dir, "parameters.png"))
 
