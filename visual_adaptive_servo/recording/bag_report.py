@@ -251,8 +251,9 @@ def timing_figures(key, signal):
 def bag_figures(rec, window=RMS_WINDOW_S):
     """The report's figures of a :class:`Recording` (the module docstring); a dict for JSON.
 
-    ``window``: final_rms_error_px is over the last ``window`` seconds, up to the
-    last joint state (the last stamp of any kind without one).
+    ``window``: the final_rms_*_error_px figures are over the last ``window`` seconds,
+    up to the last joint state (the last stamp of any kind without one); a BagError
+    unless it is a positive number.
     """
     if not (window > 0.0 and math.isfinite(window)):
         raise BagError(f"window: expected a positive number of seconds, got {window}")
