@@ -324,3 +324,16 @@ def test_a_real_arms_subset_stamps_its_commands_by_the_joint_states(noisy_run, t
     assert figures["max_abs_torque"] == summary["max_abs_torque"]
     assert "joint_states_without_command" not in figures    # unstamped: not matched by stamp
     assert "/controller_node/effort_command" in figures["missing"]
+
+
+def test_a_silent_topic_is_not_drawn_across():
+    from visual_adaptive_servo.recording.plots import _broken
+
+    t = np.concatenate([np.arange(0.0, 1.0, 0.01), np.arange(1.5, 2.0, 0.01)])
+    values = np.ones((len(t), 2))
+    t_drawn, drawn = _broken(t, values)
+    gap = np.flatnonzero(np.isnan(drawn[:, 0]))
+    assert len(gap) == 1 and 0.99 < t_drawn[gap[0]] < 1.5      # one break, inside the gap
+    np.testing.assert_array_equal(t_drawn[~np.isnan(drawn[:, 0])], t)
+    regular = values[:100]
+    assert _broken(t[:100], regular)[1] is regular                # nothing to break

@@ -169,6 +169,21 @@ PARAMETER_GROUPS = (("a_z_perp.", "a_z_perp (eq 24)"), ("a_z.", "a_z (eq 25)"),
                     ("a_d.", "a_d (eq 23)"))
 
 
+def _broken(t, values, factor=5.0):
+    """``(t, values)`` with a NaN row in each gap over ``factor`` x the median interval.
+
+    A line is then not drawn across the time a topic was silent (a stalled node).
+    """
+    if len(t) < 3:
+        return t, values
+    steps = np.diff(t)
+    gaps = np.flatnonzero(steps > factor * np.median(steps))
+    if not len(gaps):
+        return t, values
+    return (np.insert(t, gaps + 1, t[gaps] + 0.5 * steps[gaps]),
+            np.insert(values, gaps + 1, np.nan, axis=0))
+
+
 def plot_recording(series, diagnostics, out_dir):
     """The plots of a recorded run (``vas report``) from whatever it holds; the PNG paths.
 
@@ -180,7 +195,7 @@ def plot_recording(series, diagnostics, out_dir):
     """
     paths = []
     if "error" in series:
-        t, err, _ = series["error"]
+        t, err = _broken(*series["error"][:2])
         paths.append(_plot_error(out_dir, t, err, "(~/tracking_error)", series.get(
             "frame_error"), "(camera frames)"))
     if "z_hat" in series:
