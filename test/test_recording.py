@@ -280,15 +280,18 @@ def record_both(tmp_path, steps, joint_names, model, steps_per_chunk, camera=Non
     return ours, reference
 
 
-def closed_loop_steps(scenario, count):
-    """(meas, res, diagnostics due) of a closed loop with dropped frames and NaN bursts."""
+def closed_loop_steps(scenario, count, blind=range(0)):
+    """(meas, res, diagnostics due) of a closed loop with dropped frames and NaN bursts.
+
+    ``blind``: the periods with no frame at all (a tag nobody detects).
+    """
     sim = Simulator(scenario.sim)
     ctl = AdaptiveVisualTracker(scenario.controller)
     steps, last = [], None
     try:
         for k in range(count):
             meas = sim.measure()
-            if 40 <= k < 45 or k % 7 == 3:
+            if 40 <= k < 45 or k % 7 == 3 or k in blind:
                 meas = replace(meas, pixels=None, feature_stamp=None)
             elif 60 <= k < 70 and meas.pixels is not None:
                 meas = replace(meas, pixels=np.full_like(meas.pixels, np.nan))
@@ -358,6 +361,18 @@ def test_closed_loop_recording_is_message_for_message_the_reference(tmp_path, ca
     assert any(meas.pixels is None for meas, _, _ in steps)
     ours, reference = record_both(tmp_path, steps, scenario.sim.joint_names,
                                   scenario.controller.model, steps_per_chunk=64)
+    assert_same_recording(ours, reference)
+
+
+def test_a_chunk_without_any_frame_is_recorded_as_the_reference_does(tmp_path):
+    # a tag never detected for a whole chunk: no /camera/features (and, the controller
+    # holding, no ~/desired nor ~/tracking_error) in any of its periods; this raised
+    # "cannot reshape array of size 0" and lost the rest of the recording
+    scenario = load_scenario(PAPER_CONFIG)
+    steps = closed_loop_steps(scenario, 250, blind=range(100, 200))
+    assert not any(meas.pixels is not None for meas, _, _ in steps[100:200])
+    ours, reference = record_both(tmp_path, steps, scenario.sim.joint_names,
+                                  scenario.controller.model, steps_per_chunk=50)
     assert_same_recording(ours, reference)
 
 

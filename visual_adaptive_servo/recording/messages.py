@@ -596,7 +596,9 @@ class CdrLayout:
                 wire = values.astype(dtype)
             if dtype == "<f4" and np.any(np.isinf(wire) & np.isfinite(values)):
                 raise OverflowError("float too large to pack with f format")
-            out[:, at:at + wire.itemsize * width] = wire.view(np.uint8).reshape(k, -1)
+            # (reshape to (k, bytes), not (k, -1): no message at all is (0, bytes) too)
+            out[:, at:at + wire.itemsize * width] = wire.view(np.uint8).reshape(
+                k, wire.itemsize * width)
         return out
 
 
