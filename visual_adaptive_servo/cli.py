@@ -95,6 +95,9 @@ def cmd_run(args):
     print(f"outputs in {args.out}: {', '.join(summary['outputs'])}")
     if summary["diverged"]:
         print(f"DIVERGED: {summary['divergence_reason']}", file=sys.stderr)
+    untracked = _untracked(summary)
+    if untracked:
+        print(f"NOT TRACKING: {untracked}", file=sys.stderr)
     if summary.get("joint_limit_excursions"):
         print(f"JOINT LIMITS: a joint went past its URDF position limit "
               f"{summary['joint_limit_excursions']} time(s); `vas -v run ...` names them",
@@ -103,7 +106,36 @@ def cmd_run(args):
         print(f"FAILED: {summary['error']}", file=sys.stderr)
     if summary.get("interrupted"):
         return 130
-    return 1 if summary["diverged"] or summary.get("error") else 0
+    return 1 if summary["diverged"] or summary.get("error") or untracked else 0
+
+
+#: a run that ends this long without the law computing a sample did not track [s]
+UNTRACKED_END_S = 1.0
+
+
+def _untracked(summary):
+    """Why a run that did not diverge did not track either ('' when it did).
+
+    Every sample rejected (held, then the fallback), or none since ``UNTRACKED_END_S``
+    before the end: a camera whose points were never or no longer seen, joint states
+    refused, ...; ``vas -v run`` logs each rejection.
+    """
+    if summary["diverged"] or not summary.get("steps"):
+        return ""
+    last, end = summary.get("last_tracked_t", math.nan), summary["sim_time_s"]
+    if math.isfinite(last) and end - last <= UNTRACKED_END_S:
+        return ""
+    frames = ""
+    if "frames_applied" in summary:
+        frames = (f"; camera frames: {summary['frames_published']} published, "
+                  f"{summary['frames_applied']} applied")
+    if summary.get("frames_without_features"):
+        frames += (f", {summary['frames_without_features']} pictures without features "
+                   f"{summary['frames_without_features_by_reason']}")
+    when = ("every sample was rejected" if not math.isfinite(last)
+            else f"no sample tracked after t={last:.3f} s of {end:.3f} s")
+    return (f"{when} (held, then the fallback torque){frames}; `vas -v run ...` logs each "
+            f"rejection")
 
 
 def cmd_robustness(args):

@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import replace
@@ -249,6 +250,9 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     counters["joint_limit_excursions"] = getattr(ctl, "limit_excursions", 0)
     counters["reversed_motion_t"] = math.nan if reversed_motion is None else reversed_motion[0]
     counters.update(detections.figures())
+    # the last sample the law computed (the others were held or fell back): NaN if none
+    tracked = [k for k, status in enumerate(series.status) if status == "ok"]
+    counters["last_tracked_t"] = float(data["t"][tracked[-1]]) if tracked else math.nan
     summary = summarize(data, series.status, wall, diverged, reason, counters, period)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
@@ -277,7 +281,9 @@ class FrameDetections:
         found = self.detector.detect(meas.image)
         if found.pixels is None:
             self.without_features += 1
-            kind = found.reason.split(":")[0]
+            # the reason's head, before any ": " outside parentheses ("marker 1 missing: ...",
+            # "tag 0 missing (ids found: none)")
+            kind = re.split(r": (?![^()]*\))", found.reason)[0]
             self.reasons[kind] = self.reasons.get(kind, 0) + 1
             return replace(meas, pixels=None, feature_stamp=None)
         err = (found.pixels - meas.frame_true_pixels).reshape(-1, 2)
