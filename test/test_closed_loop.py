@@ -138,3 +138,36 @@ def test_ctrl_c_still_writes_outputs(tmp_path, scenario):
                            faults=interrupt)
     assert summary["interrupted"] and summary["steps"] == 20
     assert (tmp_path / "timeseries.csv").exists() and (tmp_path / "run.mcap").exists()
+
+
+@pytest.mark.parametrize("dropout, expected", [
+    ("[0.0, 10.0]", "every sample was rejected"),
+    ("[1.0, 10.0]", "no sample tracked after t=1.0"),
+])
+def test_a_run_that_does_not_track_says_so_and_fails(tmp_path, capsys, dropout, expected):
+    # a camera that never delivers (or stops for good): every sample held, then the
+    # fallback; such a run used to exit 0 with NaN figures and no word
+    code = cli.main(["run", "--config", PAPER_CONFIG, "--out", str(tmp_path / "run"),
+                     "--duration", "2.5", "--no-progress", "--no-bag",
+                     "--set", f"sim_node.faults.dropout={dropout}"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert f"NOT TRACKING: {expected}" in err and "(held, then the fallback torque)" in err
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert not summary["diverged"]
+
+
+def test_a_short_camera_outage_is_not_a_run_that_did_not_track(tmp_path, capsys):
+    code = cli.main(["run", "--config", PAPER_CONFIG, "--out", str(tmp_path / "run"),
+                     "--duration", "2.5", "--no-progress", "--no-bag",
+                     "--set", "sim_node.faults.dropout=[1.0, 0.5]"])
+    assert code == 0 and "NOT TRACKING" not in capsys.readouterr().err
+
+
+def test_a_detectors_reason_is_grouped_by_its_head():
+    from visual_adaptive_servo.runner import reason_kind
+
+    assert reason_kind("marker 1 missing: no pixel of its colour") == "marker 1 missing"
+    assert reason_kind("tag 0 missing (ids found: none)") == "tag 0 missing (ids found: none)"
+    assert reason_kind("tag 0 missing (ids found: 3): cut by the border") == \
+        "tag 0 missing (ids found: 3)"

@@ -261,6 +261,15 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     return summary
 
 
+def reason_kind(reason):
+    """A detector's reason without its details: the text before a ': ' outside parentheses.
+
+    ``marker 1 missing: no pixel of its colour`` -> ``marker 1 missing``; ``tag 0
+    missing (ids found: none)`` stays whole.
+    """
+    return re.split(r": (?![^()]*\))", reason)[0]
+
+
 class FrameDetections:
     """The feature detector between the rendered camera and the controller (rendered mode).
 
@@ -281,9 +290,7 @@ class FrameDetections:
         found = self.detector.detect(meas.image)
         if found.pixels is None:
             self.without_features += 1
-            # the reason's head, before any ": " outside parentheses ("marker 1 missing: ...",
-            # "tag 0 missing (ids found: none)")
-            kind = re.split(r": (?![^()]*\))", found.reason)[0]
+            kind = reason_kind(found.reason)
             self.reasons[kind] = self.reasons.get(kind, 0) + 1
             return replace(meas, pixels=None, feature_stamp=None)
         err = (found.pixels - meas.frame_true_pixels).reshape(-1, 2)
