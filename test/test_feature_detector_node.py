@@ -233,7 +233,8 @@ def test_a_recorded_lockstep_run_keeps_the_features_for_a_recorder_that_falls_be
 @pytest.mark.parametrize("name, value, match", [
     ("markers.colors", [255.0, 0.0, 0.0, 0.0],
      r"feature_detector\.markers\.colors: needs 3 values per marker, got 4"),
-    ("markers.tolerance", 40, r"feature_detector\.markers\.tolerance: .*type"),
+    ("markers.tolerance", "forty",
+     r"feature_detector\.markers\.tolerance: must be a number, got 'forty'"),
     ("markers.tolerance", 300.0, r"feature_detector\.markers\.tolerance: "),
     ("pixel_axes", [1.0, 2.0], r"feature_detector\.pixel_axes: every entry must be \+1 or -1"),
     ("timing_mode", "fast", r"feature_detector\.timing_mode: must be one of"),

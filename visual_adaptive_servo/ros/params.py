@@ -59,8 +59,11 @@ def descriptor(spec, read_only=None):
         high = "inf" if spec.high is None else f"{spec.high:g}"
         text = f"{text} Every entry in [{low}, {high}]."
     # an optional parameter may stay unset (derived later) and a diagonal gain may be one
-    # number: both need a type that follows the value given
-    dynamic = spec.optional or spec.scalar
+    # number: both need a type that follows the value given.  So does every number: a params
+    # file's `30` or `[0, 0, 1]` is an INTEGER (array) to rclpy, which refuses it for a
+    # DOUBLE (array) one; the schema takes integers as numbers (as vas run does) and refuses
+    # what is not a number, naming the parameter
+    dynamic = spec.optional or spec.scalar or spec.kind in ("float", "float_list")
     desc = ParameterDescriptor(name=spec.name, type=PARAMETER_TYPES[spec.kind],
                                description=text, read_only=read_only, dynamic_typing=dynamic)
     if spec.low is None and spec.high is None:
