@@ -98,3 +98,14 @@ def test_cli_names_the_joint_past_its_limit(tmp_path, capsys):
     assert ("vas: invalid configuration: vas teach: the taught path moves joint 'extend'"
             in capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []                       # nothing written
+
+
+def test_a_path_that_reaches_a_joint_limit_is_refused_too():
+    # from a new user's trial: a prismatic joint taught from 0.1 m by 0.15 m reached its
+    # 0.25 m limit exactly, and the tracking then pushed it into the end stop for seconds
+    sim = boom_sim()                    # 'extend' starts at 0.05 m, limits [-0.3, 0.3] m
+    with pytest.raises(ValueError, match=r"joint 'extend' from 0.05 to 0.3 m, within 5% of the "
+                       r"room to its URDF upper limit 0.3 m"):
+        teach(sim, duration=2.0, amplitudes=[0.0, 0.0, 0.25, 0.0], rate=10.0)
+    t, pixels = teach(sim, duration=2.0, amplitudes=[0.0, 0.0, 0.23, 0.0], rate=10.0)
+    assert np.all(np.isfinite(pixels))           # 0.28 m: 8 % of the room left

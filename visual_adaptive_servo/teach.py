@@ -53,8 +53,15 @@ def joint_path(q0, amplitudes, cycles, period):
     return q
 
 
+#: the share of the room between the start and a joint limit a taught path leaves free
+HEADROOM = 0.05
+
+
 def check_joint_limits(chain, q0, amplitudes):
     """Raise ValueError when the taught path takes a joint past its URDF position limits.
+
+    Or to within ``HEADROOM`` of the room to one: a path that reaches a limit puts the
+    arm on its end stop as soon as the tracking overshoots it.
 
     Joint j sweeps [q0_j, q0_j + a_j] (the sin^2 reaches 1 in every cycle).  The message
     names each joint that leaves its range and ends with an ``--amplitude`` list that
@@ -70,18 +77,21 @@ def check_joint_limits(chain, q0, amplitudes):
                              f"(sim_node.initial_positions)")
         end = start + a
         room_up, room_down = joint.upper - start, start - joint.lower
-        if joint.lower <= end <= joint.upper:
+        # the tracking overshoots the path: it keeps HEADROOM of the room to a limit
+        if -(1.0 - HEADROOM) * room_down <= a <= (1.0 - HEADROOM) * room_up:
             fitting.append(a)
             continue
-        side, limit = ("upper", joint.upper) if end > joint.upper else ("lower", joint.lower)
-        problems.append(f"joint {joint.name!r} from {start:g} to {end:g} {unit}, past its URDF "
-                        f"{side} limit {limit:g} {unit} (room: {room_up:.4g} {unit} up, "
+        side, limit = ("upper", joint.upper) if a > 0.0 else ("lower", joint.lower)
+        where = ("past" if not joint.lower <= end <= joint.upper
+                 else f"within {HEADROOM:.0%} of the room to")
+        problems.append(f"joint {joint.name!r} from {start:g} to {end:g} {unit}, {where} its "
+                        f"URDF {side} limit {limit:g} {unit} (room: {room_up:.4g} {unit} up, "
                         f"{room_down:.4g} {unit} down)")
         if a > 0.0:
-            fitting.append(-a if room_down >= a else
+            fitting.append(-a if (1.0 - HEADROOM) * room_down >= a else
                            0.9 * (room_up if room_up >= room_down else -room_down))
         else:
-            fitting.append(-a if room_up >= -a else
+            fitting.append(-a if (1.0 - HEADROOM) * room_up >= -a else
                            0.9 * (-room_down if room_down >= room_up else room_up))
     if problems:
         raise ValueError("the taught path moves " + "; ".join(problems) + ". Amplitudes that "
