@@ -300,3 +300,11 @@ def test_image_bounds_left_out_are_the_guessed_camera_s_picture_in_its_pixels():
                        r"-240\.0, 240\.0\]\); the simulated camera's picture is \[0\.0, 640\.0, "
                        r"0\.0, 480\.0\] in the controller's pixels"):
         load_scenario(iiwa, ["controller_node.image_bounds=[-320, 320, -240, 240]"])
+    # left out, and the guess's pixel axis turned: the message names the guessed camera (it
+    # said to leave out image_bounds, which was left out)
+    with pytest.raises(ConfigError, match=r"image_bounds is initial_estimate\.camera's picture "
+                       r"\(its image_size, pixel_origin, pixel_axes\), and the camera's pixels "
+                       r"lie in \[0\.0, 640\.0, 0\.0, 480\.0\]: give the guessed camera "
+                       r"your camera's pixel_origin and pixel_axes"):
+        load_scenario(iiwa, ["controller_node.initial_estimate.camera.pixel_axes=[1, -1]"],
+                      edit=without_bounds)

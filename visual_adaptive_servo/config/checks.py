@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..schema import CONTROLLER_SECTION, ConfigError, SIM_SECTION
+from .controller import guessed_picture_bounds
 
 
 def check_pair(sim, ctrl):
@@ -70,11 +71,18 @@ def check_start(sim, ctrl):
         if outside:
             hint = ""
             if section.endswith("image_bounds") and not np.allclose(bounds, sim.image_bounds):
-                hint = (f"; the simulated camera's picture is "
-                        f"{[float(b) for b in sim.image_bounds]} in the controller's pixels "
-                        f"(its pixel_origin, pixel_axes): give controller_node.image_bounds "
-                        f"your camera's picture in the same pixels, or leave it out to have it "
-                        f"from initial_estimate.camera")
+                picture = [float(b) for b in sim.image_bounds]
+                if np.allclose(bounds, guessed_picture_bounds(ctrl.params)):
+                    # left out: the guessed camera's picture, in its own pixel convention
+                    hint = (f"; image_bounds is initial_estimate.camera's picture (its "
+                            f"image_size, pixel_origin, pixel_axes), and the camera's pixels "
+                            f"lie in {picture}: give the guessed camera your camera's "
+                            f"pixel_origin and pixel_axes (what its driver reports)")
+                else:
+                    hint = (f"; the simulated camera's picture is {picture} in the "
+                            f"controller's pixels (its pixel_origin, pixel_axes): give "
+                            f"controller_node.image_bounds your camera's picture in the same "
+                            f"pixels, or leave it out to have it from initial_estimate.camera")
             raise ConfigError(f"sim_node.initial_positions: feature point(s) {outside} outside "
                               f"the image at the start (pixels {np.round(pixels, 1).tolist()}, "
                               f"{section} {[float(b) for b in bounds]}){hint}")

@@ -48,7 +48,7 @@ def _nominal(model, values):
                           values["initial_estimate.inertia_scale"])
 
 
-def _picture_bounds(values):
+def guessed_picture_bounds(values):
     """The guessed camera's picture [u_min, u_max, v_min, v_max] in the controller's pixels.
 
     The picture's size and pixel convention are known for a real camera (no calibration
@@ -252,7 +252,7 @@ CONTROLLER_PARAMS = (
     ParamSpec("max_dt", 0.05, "float",
               "Longest interval integrated in one step [s]; longer gaps are clamped.",
               1e-5, 10.0),
-    ParamSpec("image_bounds", lambda m, v: _picture_bounds(v), "float_list",
+    ParamSpec("image_bounds", lambda m, v: guessed_picture_bounds(v), "float_list",
               "Valid feature region [u_min, u_max, v_min, v_max] [px].  Default: the picture "
               "in the controller's pixels, from initial_estimate.camera's image_size, "
               "pixel_origin and pixel_axes (what a camera's driver tells)."),
