@@ -57,10 +57,10 @@ def joint_path(q0, amplitudes, cycles, period):
 HEADROOM = 0.05
 
 
-def check_joint_limits(chain, q0, amplitudes):
+def check_joint_limits(chain, q0, amplitudes, headroom=HEADROOM):
     """Raise ValueError when the taught path takes a joint past its URDF position limits.
 
-    Or to within ``HEADROOM`` of the room to one: a path that reaches a limit puts the
+    Or to within ``headroom`` of the room to one: a path that reaches a limit puts the
     arm on its end stop as soon as the tracking overshoots it.
 
     Joint j sweeps [q0_j, q0_j + a_j] (the sin^2 reaches 1 in every cycle).  The message
@@ -77,32 +77,34 @@ def check_joint_limits(chain, q0, amplitudes):
                              f"(sim_node.initial_positions)")
         end = start + a
         room_up, room_down = joint.upper - start, start - joint.lower
-        # the tracking overshoots the path: it keeps HEADROOM of the room to a limit
-        if -(1.0 - HEADROOM) * room_down <= a <= (1.0 - HEADROOM) * room_up:
+        # the tracking overshoots the path: it keeps headroom of the room to a limit
+        if -(1.0 - headroom) * room_down <= a <= (1.0 - headroom) * room_up:
             fitting.append(a)
             continue
         side, limit = ("upper", joint.upper) if a > 0.0 else ("lower", joint.lower)
         where = ("past" if not joint.lower <= end <= joint.upper
-                 else f"within {HEADROOM:.0%} of the room to")
+                 else f"within {headroom:.0%} of the room to")
         problems.append(f"joint {joint.name!r} from {start:g} to {end:g} {unit}, {where} its "
                         f"URDF {side} limit {limit:g} {unit} (room: {room_up:.4g} {unit} up, "
                         f"{room_down:.4g} {unit} down)")
         if a > 0.0:
-            fitting.append(-a if (1.0 - HEADROOM) * room_down >= a else
+            fitting.append(-a if (1.0 - headroom) * room_down >= a else
                            0.9 * (room_up if room_up >= room_down else -room_down))
         else:
-            fitting.append(-a if (1.0 - HEADROOM) * room_up >= -a else
+            fitting.append(-a if (1.0 - headroom) * room_up >= -a else
                            0.9 * (-room_down if room_down >= room_up else room_up))
     if problems:
         raise ValueError("the taught path moves " + "; ".join(problems) + ". Amplitudes that "
                          "fit: --amplitude " + ",".join(f"{a:.4g}" for a in fitting))
 
 
-def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0):
+def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0,
+          headroom=None):
     """Move the simulated arm along the taught path; return (t (N,), pixels (N, 2m)).
 
-    Raises ValueError when a joint would pass its URDF position limits
-    (:func:`check_joint_limits`) or a point leaves the picture or goes behind the camera.
+    Raises ValueError when a joint would pass its URDF position limits or come within
+    ``headroom`` (default :data:`HEADROOM`) of the room to one (:func:`check_joint_limits`),
+    or a point leaves the picture or goes behind the camera.
     """
     from sim_bridge.plant import ArmPlant
     from .models import GRAVITY
@@ -116,7 +118,8 @@ def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0):
         raise ValueError(f"cycles: whole numbers >= 1 per joint, got {list(cycles)}")
     if not duration > 0.0 or not rate > 0.0:
         raise ValueError(f"duration and rate must be > 0, got {duration} and {rate}")
-    check_joint_limits(arm.chain, sim_config.initial_positions, amplitudes)
+    check_joint_limits(arm.chain, sim_config.initial_positions, amplitudes,
+                       HEADROOM if headroom is None else headroom)
     path = joint_path(sim_config.initial_positions, amplitudes, cycles, duration)
     times = np.linspace(0.0, duration, int(round(duration * rate)) + 1)
     camera = sim_config.camera
