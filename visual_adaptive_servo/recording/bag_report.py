@@ -272,10 +272,9 @@ def bag_figures(rec, window=RMS_WINDOW_S):
                        (command_topic, "commands")):
         if topic in sig and np.isfinite(sig[topic].t).all():
             figures.update(timing_figures(key, sig[topic]))
-    if FEATURES in sig and DESIRED in sig:
-        t, err = frame_errors(times[FEATURES], sig[FEATURES].values, times[DESIRED],
-                              sig[DESIRED].values)
-        figures.update(_error_figures("frame", t, err, end, window))
+    frames = frame_error_series(rec)
+    if frames is not None:
+        figures.update(_error_figures("frame", *frames, end, window))
     if TRACKING_ERROR in sig:
         figures.update(_error_figures("tracking", times[TRACKING_ERROR],
                                       sig[TRACKING_ERROR].values, end, window))
@@ -319,6 +318,15 @@ def frame_errors(t_frames, frames, t_desired, desired):
     err = frames - desired_at(t_desired, desired, t_frames)
     kept = np.isfinite(err).all(axis=1)
     return t_frames[kept], err[kept]
+
+
+def frame_error_series(rec):
+    """:func:`frame_errors` of a Recording's frames and x_d; None without both topics."""
+    sig = rec.signals
+    if FEATURES not in sig or DESIRED not in sig:
+        return None
+    return frame_errors(sig[FEATURES].t, sig[FEATURES].values, sig[DESIRED].t,
+                        sig[DESIRED].values)
 
 
 def _error_figures(kind, t, err, end, window):
@@ -434,10 +442,9 @@ def write_report(rec, out_dir, window=RMS_WINDOW_S):
         t, values, labels = series["observed"]
         kept = t >= series["desired"][0][0] - 1e-9
         series["observed"] = (t[kept], values[kept], labels)
-    if FEATURES in rec.signals and DESIRED in rec.signals:
-        t, err = frame_errors(rec.signals[FEATURES].t, rec.signals[FEATURES].values,
-                              rec.signals[DESIRED].t, rec.signals[DESIRED].values)
-        series["frame_error"] = (t, err)
+    frames = frame_error_series(rec)
+    if frames is not None:
+        series["frame_error"] = frames
     if "torque" not in series and COMMANDS in rec.signals:
         series["torque"] = (rec.signals[COMMANDS].t, rec.signals[COMMANDS].values, [])
     figures["outputs"] = ["report.json"] + [
