@@ -16,7 +16,8 @@
 
 As a terminal does it: ``ros2 launch`` runs in a session of its own and SIGINT
 goes to its whole process group, mid-run, so each node gets one SIGINT from
-the "terminal" and one more from launch.  The oracle is the process table (a
+the "terminal" and one more from launch; and a storm of SIGINTs after that,
+every 20 ms to each node until it is gone, changes nothing.  The oracle is the process table (a
 node is gone when its /proc entry is gone or a zombie) and launch's own report
 of each exit ("process has finished cleanly").  Needs ``ros2`` and the
 installed package (colcon build); skipped otherwise.
@@ -65,11 +66,11 @@ def _wait_for(path, text, timeout):
     return False
 
 
-@pytest.mark.parametrize("timing_mode, camera_mode", [
-    ("lockstep", "points"), ("realtime", "points"), ("lockstep", "rendered"),
-    ("realtime", "rendered")])
-def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
-        tmp_path, timing_mode, camera_mode):
+def _interrupt(tmp_path, timing_mode, camera_mode, storm):
+    """Launch, SIGINT the group mid-run; with ``storm`` SIGINT each node every 20 ms after.
+
+    Returns the launch's log, each node's pid and name, and the seconds each took to go.
+    """
     log = tmp_path / "launch.log"
     env = dict(os.environ, ROS_DOMAIN_ID=str(200 + os.getpid() % 30))
     with open(log, "w", encoding="utf-8") as out:
@@ -92,7 +93,12 @@ def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
             for pid, name in nodes.items():
                 if name not in stopped and not _alive(pid):
                     stopped[name] = time.monotonic() - sigint
-            time.sleep(0.005)
+                elif name not in stopped and storm:
+                    try:
+                        os.kill(pid, signal.SIGINT)
+                    except ProcessLookupError:
+                        pass
+            time.sleep(0.02 if storm else 0.005)
         assert launch.wait(timeout=15.0) == 0
     finally:
         if launch.poll() is None:
@@ -103,4 +109,23 @@ def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
     for pid, name in nodes.items():
         assert f"process has finished cleanly [pid {pid}]" in text, (name, text)
     assert set(stopped) == expected
+    return stopped
+
+
+@pytest.mark.parametrize("timing_mode, camera_mode", [
+    ("lockstep", "points"), ("realtime", "points"), ("lockstep", "rendered"),
+    ("realtime", "rendered")])
+def test_sigint_to_the_launch_stops_every_node_cleanly_within_a_second(
+        tmp_path, timing_mode, camera_mode):
+    stopped = _interrupt(tmp_path, timing_mode, camera_mode, storm=False)
     assert max(stopped.values()) < 1.0, stopped
+
+
+@pytest.mark.parametrize("timing_mode, camera_mode", [("realtime", "rendered")])
+def test_sigints_after_the_first_change_nothing_up_to_the_nodes_exit(
+        tmp_path, timing_mode, camera_mode):
+    # The terminal's SIGINT and launch's forwarded one come apart; a late one used to land
+    # after run_node's end, under Python's handler or, in the interpreter's finalisation,
+    # under none (exit -2, "process has died": 1 run in 10 of the test above, every run here)
+    stopped = _interrupt(tmp_path, timing_mode, camera_mode, storm=True)
+    assert max(stopped.values()) < 2.0, stopped

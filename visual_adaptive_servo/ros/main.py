@@ -30,8 +30,8 @@ So rclpy installs no signal handler here (``SignalHandlerOptions.NO``); SIGINT
 and SIGTERM only set a flag, and the executor spins with a short timeout and
 looks at the flag between callbacks.  The sample in flight is finished, the
 context stays valid until the node is destroyed, a second signal changes
-nothing, and the node exits with status 0 within ``SPIN_TIMEOUT`` plus one
-callback.
+nothing (after the first, signals are ignored up to the process's end), and
+the node exits with status 0 within ``SPIN_TIMEOUT`` plus one callback.
 
 The executor: :class:`~.executor.KeptWaitSetExecutor` (the node parameter
 ``executor``, read-only, default ``kept_wait_set``), which does rclpy's
@@ -157,4 +157,9 @@ def run_node(make_node, name, args=None, config_errors=(ConfigError,)):
             node.destroy_node()
         rclpy.try_shutdown()
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            # After a stop signal, later ones are ignored up to the process's end: the
+            # terminal's SIGINT and the one ``ros2 launch`` forwards come apart, and one that
+            # lands after this point would otherwise find Python's own handler, or, once the
+            # interpreter finalises (it resets handlers it set to SIG_DFL, not SIG_IGN), none:
+            # exit status -2 and launch's "process has died" after a clean stop.
+            signal.signal(sig, signal.SIG_IGN if stop.is_set() else handler)
