@@ -76,7 +76,7 @@ from visual_adaptive_servo.config.ros2_control import (
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
-    node_parameters, rate_arguments, rates, recording_folder, sim_duration
+    node_parameters, rate_arguments, rates, recording_folder, sim_duration, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -154,8 +154,8 @@ def _nodes(context):
         RegisterEventHandler(OnProcessExit(target_action=controller_node, on_exit=_unspawn)),
         LogInfo(msg=f"{os.path.basename(params_file)} through ros2_control: controller_manager "
                     f"at {rate} Hz, joints {list(sim.joint_names)}"),
-        RegisterEventHandler(OnProcessExit(target_action=sim_node, on_exit=[
-            TimerAction(period=RECORDER_GRACE, actions=[shutdown]) if record else shutdown])),
+        RegisterEventHandler(OnProcessExit(target_action=sim_node, on_exit=unless_failed([
+            TimerAction(period=RECORDER_GRACE, actions=[shutdown]) if record else shutdown]))),
     ]
     if record:
         bag_dir = recording_folder(context)

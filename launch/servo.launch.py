@@ -27,7 +27,8 @@ controller_node uses sim time.  ``camera_mode:=rendered`` (default: the file's
 ``sim_node.camera_mode``) makes the simulator publish pictures and starts the
 feature_detector, configured by the file's ``feature_detector`` section.
 When any node exits (sim_node after ``duration`` of simulated time: the file's, or
-the ``duration:=`` argument's) the launch shuts down.  ``record:=true`` runs
+the ``duration:=`` argument's) the launch shuts down; a node that exits with an error
+makes it exit with status 1 (launch_args.unless_failed).  ``record:=true`` runs
 ``ros2 bag record -s mcap`` on the topics ``vas run`` records
 (visual_adaptive_servo.recording.recorder.TOPICS) and sets
 ``sim_node.start.wait_for_recorder``: the simulation starts once the recorder
@@ -71,7 +72,7 @@ from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
     node_parameters, rate_arguments, rates, recorder_qos_overrides, recording_folder, \
-    sim_duration
+    sim_duration, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 # s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
@@ -130,7 +131,7 @@ def _nodes(context):
             on_exit = [EmitEvent(event=SignalProcess(signal_number=signal.SIGINT,
                                                      process_matcher=matches_action(controller)))]
         actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
-                                                          on_exit=on_exit)))
+                                                          on_exit=unless_failed(on_exit))))
     if record:
         bag_dir = recording_folder(context)
         cmd = ["ros2", "bag", "record", "-s", "mcap"]

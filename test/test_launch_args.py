@@ -20,10 +20,13 @@ import pytest
 pytest.importorskip("launch_ros", reason="needs ROS 2 launch (a sourced Jazzy)")
 
 from launch import LaunchContext  # noqa: E402
+from launch.actions import ExecuteProcess, LogInfo  # noqa: E402
+from launch.events.process import ProcessExited  # noqa: E402
 
 from visual_adaptive_servo.ros.launch_args import (  # noqa: E402
     recording_folder,
     sim_duration,
+    unless_failed,
 )
 
 
@@ -53,3 +56,24 @@ def test_duration_is_the_files_unless_given_and_then_seconds_from_0():
         with pytest.raises(RuntimeError, match=rf"duration:={text}: expected a number of "
                            r"simulated seconds, 0 or more \(0: for ever\)"):
             sim_duration(_context(duration=text))
+
+
+def _exited(returncode):
+    action = ExecuteProcess(cmd=["sim_node"], name="sim_node")
+    return ProcessExited(action=action, name="sim_node-1", cmd=["sim_node"], cwd=None,
+                         env=None, pid=4242, returncode=returncode)
+
+
+def test_a_node_that_fails_makes_the_launch_fail_and_a_clean_exit_does_what_it_did():
+    # ros2 launch exits 0 whatever its processes do; an exception in an event handler makes
+    # LaunchService.run return 1 (after shutting everything down)
+    then = [LogInfo(msg="shutting down")]
+    handle = unless_failed(then)
+    assert handle(_exited(0), LaunchContext()) is then
+    with pytest.raises(RuntimeError, match=r"sim_node-1 exited with status 2 \(its log above "
+                       r"says why\)"):
+        handle(_exited(2), LaunchContext())
+    # a node stopped by the shutdown (Ctrl-C, another node's end) is not a failure
+    stopping = LaunchContext()
+    stopping._set_is_shutdown(True)      # what LaunchService does when it shuts down
+    assert handle(_exited(-2), stopping) is then

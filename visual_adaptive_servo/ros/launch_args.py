@@ -92,6 +92,24 @@ def recorder_qos_overrides(topics, folder=None):
     return path
 
 
+def unless_failed(on_exit):
+    """OnProcessExit's ``on_exit`` for a node of ours: ``on_exit`` after a clean exit.
+
+    A node that exits with an error (an invalid parameter file: status 2) instead stops
+    the launch with status 1: ``ros2 launch`` itself exits 0 whatever its processes do,
+    but an exception raised while it handles an event is logged (``Caught exception in
+    launch ...: sim_node exited with status 2``), shuts everything down and makes the
+    launch service return 1.  Exits during a shutdown (Ctrl-C, another node's end) raise
+    nothing.
+    """
+    def handle(event, context):
+        if event.returncode != 0 and not context.is_shutdown:
+            raise RuntimeError(f"{event.process_name} exited with status {event.returncode} "
+                               f"(its log above says why)")
+        return on_exit
+    return handle
+
+
 def duration_argument():
     """DeclareLaunchArgument ``duration``: sim_node's simulated seconds (:func:`sim_duration`)."""
     return DeclareLaunchArgument(
