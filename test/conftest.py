@@ -139,22 +139,26 @@ def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
 
 
 @contextlib.contextmanager
-def logged_warnings(name="visual_adaptive_servo.control.controller"):
-    """The warning records logger ``name`` emits inside the block (a list, filled as it runs).
+def logged_warnings(name="visual_adaptive_servo.control.controller", level=logging.WARNING):
+    """The records of ``level`` and above logger ``name`` emits inside the block (a list).
 
     A handler on the module's logger, not caplog: with ROS sourced, launch_testing's
     pytest plugin makes every new logger a LaunchLogger that does not propagate to the
     root, so caplog sees nothing under ``colcon test``.
     """
     records = []
-    handler = logging.Handler(logging.WARNING)
+    handler = logging.Handler(level)
     handler.emit = records.append
     logger = logging.getLogger(name)
+    was = logger.level
     logger.addHandler(handler)
+    if level < logger.getEffectiveLevel():
+        logger.setLevel(level)
     try:
         yield records
     finally:
         logger.removeHandler(handler)
+        logger.setLevel(was)
 
 
 def bag_messages(path, topic):

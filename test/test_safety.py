@@ -15,7 +15,10 @@
 """Safe start, projection, saturation, the J* guard and bad input in the sampled controller."""
 
 
+import logging
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -467,27 +470,60 @@ def test_the_run_summary_counts_the_limit_excursions(tmp_path, capsys):
     summary = run_scenario(load_scenario(str(tmp_path / "boom.yaml")), str(tmp_path / "run"),
                            duration=0.2, progress=False, record=False, plots=False)
     assert summary["joint_limit_excursions"] == 1
-    # vas run says so at the end (its log shows errors only unless -v)
+    # vas run says so at the end (and its log warns at each excursion)
     from visual_adaptive_servo import cli
     code = cli.main(["run", "--config", str(tmp_path / "boom.yaml"), "--out",
                      str(tmp_path / "cli"), "--duration", "0.1", "--no-bag", "--no-progress"])
     assert code == 0
     assert ("JOINT LIMITS: a joint went past its URDF position limit 1 time(s)"
             in capsys.readouterr().err)
+    # ... and its log warns as it happens, without -v: a process of its own, as a user runs it
+    # (pytest's handlers on the root logger would make vas's logging setup a no-op here)
+    done = subprocess.run(
+        [sys.executable, "-m", "visual_adaptive_servo.cli", "run", "--config",
+         str(tmp_path / "boom.yaml"), "--out", str(tmp_path / "proc"), "--duration", "0.1",
+         "--no-bag", "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    warned = [line for line in done.stderr.splitlines() if line.startswith("WARNING")]
+    assert len(warned) == 1 and "is past its URDF upper limit" in warned[0], done.stderr
+
+
+def test_a_camera_that_never_starts_is_warned_of_once_after_the_camera_timeout():
+    ctl = controller()
+    timeout = ctl.config["safety.camera_timeout"]
+    steps = int(round(3 * timeout / T))
+    with logged_warnings() as records:
+        for k in range(steps):
+            ctl.step(k * T, Q0, np.zeros(3))                    # no frame, ever
+    lines = [r.getMessage() for r in records]
+    assert len(lines) == 1 and "no camera frame yet" in lines[0], lines
+    # at the first sample past the timeout, not before
+    assert f"t={int(np.ceil(timeout / T - 1e-9)) * T:.4f}" in lines[0], lines
+    # a frame, then the camera gone: the stale camera's warnings, not this one
+    ctl = controller()
+    with logged_warnings() as records:
+        ctl.step(0.0, Q0, np.zeros(3), measure(ctl))
+        for k in range(1, steps):
+            ctl.step(k * T, Q0, np.zeros(3))
+    assert not any("no camera frame yet" in r.getMessage() for r in records)
+    assert any("camera stale" in r.getMessage() for r in records)
 
 
 def test_a_second_problem_of_the_same_input_is_logged_and_a_growing_age_is_not():
     # a rendered camera whose detector sends one point for a two-point controller: the log
     # once showed only 'waiting for the first camera frame' (both problems are of feature x)
     ctl = controller()
-    with logged_warnings() as records:
+    with logged_warnings(level=logging.INFO) as records:
         ctl.step(0.0, Q0, np.zeros(3))                          # no frame yet
         for k in range(1, 4):
             ctl.step(k * T, Q0, np.zeros(3), np.zeros(1))       # the wrong size, 3 samples
-    lines = [r.getMessage() for r in records if "rejected" in r.getMessage()]
-    assert len(lines) == 2, lines
-    assert "waiting for the first camera frame" in lines[0]
-    assert "feature x" in lines[1] and "waiting" not in lines[1]
+    lines = [r for r in records if "rejected" in r.getMessage()]
+    assert len(lines) == 2, [r.getMessage() for r in lines]
+    # a camera's start is no warning (every camera-driven run has one); the wrong size is
+    assert "waiting for the first camera frame" in lines[0].getMessage()
+    assert lines[0].levelno == logging.INFO
+    assert "feature x" in lines[1].getMessage() and "waiting" not in lines[1].getMessage()
+    assert lines[1].levelno == logging.WARNING
     # a stale camera's age grows at every sample: one line for the whole outage
     ctl = controller()
     ctl.step(0.0, Q0, np.zeros(3), measure(ctl))

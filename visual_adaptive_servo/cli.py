@@ -176,7 +176,9 @@ def cmd_report(args):
 
 def build_parser():
     parser = argparse.ArgumentParser(prog="vas", description=__doc__.split("\n\n")[0])
-    parser.add_argument("-v", "--verbose", action="store_true", help="log every rejected sample")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log at INFO (vas run logs warnings without it, the other "
+                        "commands errors only)")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run the closed loop without ROS and record it")
     run.add_argument("--config", required=True, help="ROS parameter YAML (sim_node + "
@@ -236,7 +238,14 @@ def build_parser():
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR,
+    if args.command == "run":
+        # one run: its warnings (a start check, a joint past its limit, a stale camera, a
+        # capped fallback) are printed, above the progress bar; many runs: errors only
+        from .runner import LogAboveProgress
+        level, handlers = logging.WARNING, [LogAboveProgress(sys.stderr)]
+    else:
+        level, handlers = logging.ERROR, None
+    logging.basicConfig(level=logging.INFO if args.verbose else level, handlers=handlers,
                         format="%(levelname)s %(name)s: %(message)s")
     # a first start compiles for half a minute: say so, -v or not (models/backend.py)
     logging.getLogger(NOTICE_LOGGER).setLevel(logging.INFO)

@@ -43,7 +43,13 @@ log = logging.getLogger(__name__)
 
 
 class Progress:
-    """A one-line progress bar on a terminal (silent when not a TTY)."""
+    """A one-line progress bar on a terminal (silent when not a TTY).
+
+    ``Progress.live`` is the bar being drawn, if any: :class:`LogAboveProgress` clears its
+    line before a log message and has it drawn again at its next update.
+    """
+
+    live = None
 
     def __init__(self, total, enabled=None, stream=sys.stderr, width=30):
         self.total, self.stream, self.width = total, stream, width
@@ -57,14 +63,28 @@ class Progress:
         if pct == self.last and done < self.total:
             return
         self.last = pct
+        Progress.live = self
         filled = int(self.width * done / max(self.total, 1))
         self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {pct:3d}% {note}")
         self.stream.flush()
 
     def close(self):
+        if Progress.live is self:
+            Progress.live = None
         if self.enabled:
             self.stream.write("\n")
             self.stream.flush()
+
+
+class LogAboveProgress(logging.StreamHandler):
+    """A log handler that writes its messages on lines of their own above a live bar."""
+
+    def emit(self, record):
+        bar = Progress.live
+        if bar is not None and bar.stream is self.stream:
+            self.stream.write("\r\x1b[K")      # the bar's line, cleared; drawn again next
+            bar.last = -1
+        super().emit(record)
 
 
 class Series:

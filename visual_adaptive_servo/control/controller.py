@@ -50,6 +50,9 @@ from .trajectory import BlendedStart
 log = logging.getLogger(__name__)
 #: a number in a problem's text (masked when telling two problems apart)
 _NUMBER = re.compile(r"\d+(\.\d*)?(e[-+]?\d+)?")
+#: a sample's problem before the first frame: logged at INFO (a camera's start), and a
+#: warning once it has lasted safety.camera_timeout
+WAITING_FOR_CAMERA = "feature x: waiting for the first camera frame"
 INF = float("inf")
 #: how often the joint positions are checked against the URDF's limits [s of sample time]
 LIMIT_CHECK_PERIOD = 0.01
@@ -812,6 +815,7 @@ class AdaptiveVisualTracker:
         if getattr(self, "reversal", None) is not None:
             self.reversal.reset()
         self._rejecting = ()        # kinds of problem of the current rejection streak
+        self._waiting_since = None  # its start, while it waits for the first frame unwarned
         self.damping = self.fallback_bound = None
         # complete before the first sample when the configuration gives every gain (D comes
         # at the first sample); otherwise once the missing ones are derived there
@@ -1041,7 +1045,7 @@ class AdaptiveVisualTracker:
             x_hat = self.predictor.predict(t)
         applied = stamp if frame is not None else None
         if x_hat is None:
-            problems = problems or ["feature x: waiting for the first camera frame"]
+            problems = problems or [WAITING_FOR_CAMERA]
         elif frame is None and self._check_stale(t):
             problems = problems or [f"feature x: no camera frame for "
                                     f"{t - self.t_last_feature:.3f} s (camera stale)"]
@@ -1407,12 +1411,15 @@ class AdaptiveVisualTracker:
                                              config["safety.fallback_damping"])
         capped = self.fallback_bound < config["safety.fallback_damping"]
         if np.any(capped):
+            # the default is capped quietly where the arm is light; a value given is warned of
+            given = "safety.fallback_damping" in getattr(config, "explicit", frozenset())
             used = ", ".join(f"{name} {b:.3g}" for name, b, c in zip(
                 report.joint_names, self.fallback_bound.tolist(), capped.tolist()) if c)
-            log.warning("safety.fallback_damping %g N m s/rad is more than the sampled-data "
-                        "bound of the light joints; the fallback uses %s there (the largest "
-                        "step of T M_hat^-1 (D + diag d) <= %g)",
-                        config["safety.fallback_damping"], used, FALLBACK_STEP)
+            log.log(logging.WARNING if given else logging.INFO,
+                    "safety.fallback_damping %g N m s/rad is more than the sampled-data "
+                    "bound of the light joints; the fallback uses %s there (the largest "
+                    "step of T M_hat^-1 (D + diag d) <= %g)",
+                    config["safety.fallback_damping"], used, FALLBACK_STEP)
         fast = self._compiled_sample()
         if fast is not None:
             # packed now, not in a later sample
@@ -1631,8 +1638,17 @@ class AdaptiveVisualTracker:
         kinds = tuple(_NUMBER.sub("#", p) for p in problems)
         if kinds != self._rejecting:
             for p in problems:
-                log.warning("sample at t=%.4f rejected: %s", t, p)
+                log.log(logging.INFO if p == WAITING_FOR_CAMERA else logging.WARNING,
+                        "sample at t=%.4f rejected: %s", t, p)
             self._rejecting = kinds
+            self._waiting_since = t if problems == [WAITING_FOR_CAMERA] else None
+        elif (self._waiting_since is not None
+              and t - self._waiting_since >= self.config["safety.camera_timeout"]):
+            log.warning("no camera frame yet, %.3f s after the first sample (t=%.4f; "
+                        "safety.camera_timeout %g s): the controller holds the safety fallback "
+                        "until one comes", t - self._waiting_since, t,
+                        self.config["safety.camera_timeout"])
+            self._waiting_since = None
         safety = self.config
         xd = (self.desired_at(t)[0] if self.t_last is not None
               else np.full(2 * self.model.m, np.nan))
