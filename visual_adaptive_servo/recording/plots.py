@@ -84,7 +84,8 @@ def _plot_torques(t, tau, out_dir, names=()):
     fig, ax = plt.subplots(figsize=(7, 4))
     for i in range(tau.shape[1]):
         ax.plot(t, tau[:, i], label=names[i] if len(names) == tau.shape[1] else f"tau{i + 1}")
-    ax.set(xlabel="time [s]", ylabel="torque [N m]", title="Joint torques")
+    ax.set(xlabel="time [s]", ylabel="torque [N m] (prismatic: force [N])",
+           title="Joint torques")
     ax.grid(True)
     ax.legend()
     return _save(fig, os.path.join(out_dir, "torques.png"))
