@@ -25,7 +25,7 @@ applied instead, with the reason returned to the caller.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from math import isfinite
 
 import numpy as np
@@ -38,6 +38,11 @@ from . import render
 from .camera import FeatureCamera
 from .plant import ArmPlant
 from .scene import TagBody
+
+
+#: the picture of a frame captured by ``Simulator.measure(defer_picture=True)``, until
+#: ``Simulator.render_deferred``
+DEFERRED = object()
 
 
 @dataclass(frozen=True)
@@ -150,10 +155,13 @@ class Simulator:
     def t(self):
         return self.step_index * self._period
 
-    def measure(self):
+    def measure(self, defer_picture=False):
         """Sensors now: the joint state, and the camera frame published now (if any).
 
-        The ``faults.*`` windows apply here (see :class:`Faults`).
+        The ``faults.*`` windows apply here (see :class:`Faults`).  ``defer_picture``
+        (rendered): a frame captured now holds :data:`DEFERRED` instead of its picture
+        until :meth:`render_deferred`, so that the joint state can be published before
+        the render (a realtime loop: the controller computes while the picture renders).
         """
         q, qd = self.plant.joint_state()
         t = self.t
@@ -161,8 +169,10 @@ class Simulator:
         self._place_occluder(t)
         if self.rendered and self.pictures.settings.blurred:
             self._expose(t)
-        frame = self.feature_camera.step(t, true_pixels, true_depth,
-                                         self._render if self.rendered else None)
+        render = None
+        if self.rendered:
+            render = (lambda: DEFERRED) if defer_picture else self._render
+        frame = self.feature_camera.step(t, true_pixels, true_depth, render)
         problems = []
         pixels, stamp, image, frame_truth = None, None, None, None
         measured_q = q
@@ -264,6 +274,21 @@ class Simulator:
         if min(depth.tolist()) <= render.NEAR:
             return None
         return self.camera.to_raw(pixels)
+
+    def render_deferred(self, meas):
+        """``meas`` of :meth:`measure` (``defer_picture``) with the picture captured now rendered.
+
+        Call it before the next :meth:`apply` or :meth:`hold`: the plant is still where it
+        was at the capture, so the picture is the one :meth:`measure` would have rendered.
+        A frame that waits for its latency gets its picture in the camera's queue.
+        """
+        pending = self.feature_camera.pending
+        for i, frame in enumerate(pending):
+            if frame.image is DEFERRED:
+                pending[i] = replace(frame, image=self._render())
+        if meas.image is DEFERRED:
+            meas = replace(meas, image=self._render())
+        return meas
 
     def _render(self):
         """The camera's picture now, markers placed (render.PictureMaker: how it looks)."""

@@ -249,3 +249,34 @@ def test_a_window_after_a_whole_picture_without_the_plates_window_is_made_whole(
     finally:
         fast.close()
         slow.close()
+
+
+@pytest.mark.parametrize("config, overrides", [
+    (CONFIG, ()),                                   # a tag, 30 Hz, 33 ms late, noise, blur
+    (os.path.join(ROOT, "config", "paper_3dof.yaml"),
+     ("sim_node.camera_mode=rendered",)),          # balls, a frame at every period
+    (os.path.join(ROOT, "config", "paper_3dof.yaml"),
+     ("sim_node.camera_mode=rendered", "sim_node.camera_latency=0.01"))])
+def test_a_picture_rendered_after_the_joint_state_is_the_one_measure_renders(config,
+                                                                             overrides):
+    # sim_node in realtime publishes the joint state, then renders (defer_picture): the
+    # oracle is the same simulator rendering inside measure(), step for step, byte for byte
+    sims = [Simulator(load_scenario(config, list(overrides)).sim) for _ in range(2)]
+    try:
+        rng = np.random.default_rng(3)
+        pictures = 0
+        for _ in range(int(round(0.15 / sims[0].config.control_period))):
+            now, later = sims[0].measure(), sims[1].measure(defer_picture=True)
+            later = sims[1].render_deferred(later)
+            assert (now.image is None) == (later.image is None)
+            if now.image is not None:
+                np.testing.assert_array_equal(later.image, now.image)
+                pictures += 1
+            np.testing.assert_array_equal(later.q, now.q)
+            tau = rng.normal(0.0, 2.0, sims[0].n)
+            for sim in sims:
+                sim.apply(tau)
+        assert pictures >= 3
+    finally:
+        for sim in sims:
+            sim.close()

@@ -92,9 +92,13 @@ controller first: deterministic up to the detector timeout.
 
 ``realtime``: a wall-clock timer at ``control_period`` applies the latest
 /effort_controller/commands (zero torque once it is older than
-``command_timeout``; as a ros2_control hardware the latest command from
+``command_timeout``; taken from the subscription at the period's start, so that
+a command that arrived while the node was busy is not left for the period
+after; as a ros2_control hardware the latest command from
 ``hardware.command_topic``, the brakes without one), then publishes the frame
-due now and the joint state first, /clock and ~/true_depth after them and at
+due now and the joint state first (rendered: the joint state, then the picture,
+rendered after it of the same state, so the controller computes while it
+renders), /clock and ~/true_depth after them and at
 ``publish_rate`` (a read-only node parameter, default 100 Hz of simulated time;
 as a ros2_control hardware /clock at every period): the controller's period
 starts with the joint state, and runs on its stamp, not on /clock (gazebo_ros
@@ -110,7 +114,10 @@ states them.  A new command is a message received since the previous period;
 as a ros2_control hardware, which resends the effort controller's latest
 command at every cycle, a command whose torques differ from the previous one
 (so a new command bit-identical to the one before, a torque held at its
-limit, is not seen as new there).
+limit, is not seen as new there).  A period whose work outlasts the control
+period (rendering a 640x480 picture at every 5 ms period here) is counted
+(``overrun_periods``), warned of and stated at the end: the simulation then runs
+slower than real time.
 
 The per-period messages (the frame, /clock, /joint_states, ~/true_depth, and the
 commands in realtime) are serialized and read by :mod:`..recording.cdr`, the
@@ -163,6 +170,7 @@ START_POLL = 0.05          # s of wall time between two checks for the subscribe
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
 WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
 PUBLISH_RATE = 100.0       # Hz of sim time: /clock and ~/true_depth in realtime
+OVERRUN_WARNING = 0.5      # of a second's periods longer than the period: warned of (realtime)
 # the controller_manager's ~/activity: published on every change, reliable and transient local
 ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -277,6 +285,11 @@ class SimNode(Node):
         self.counters = {"steps": 0, "command_timeouts": 0, "refused_commands": 0,
                          "stale_commands": 0, "frame_delivery_timeouts": 0,
                          "detector_timeouts": 0, "held_periods": 0}
+        if not self.lockstep:
+            # periods whose work (the step, the render, the publishing) outlasted the period
+            self.counters["overrun_periods"] = 0
+            self.longest_period = 0.0       # s of wall time
+            self.overrun_window = [0, 0, 0.0]   # about 1 s: periods, overruns, longest [s]
         self.problem = ""
         self.last_level, self.t_last_diagnostics = None, None
         self.wall_start = None
@@ -418,20 +431,67 @@ class SimNode(Node):
             self.publishers_by_topic["/clock"].publish(self.pending_clock)
             self.pending_clock = None
             return
+        if not self.hardware_topic:
+            self._take_commands()
         now = time.monotonic()
         fresh = (self.command_wall is not None
                  and now - self.command_wall <= self.config.command_timeout)
         if self.hardware_topic:
             self.command_age.period(now, fresh and self.effort_state == "active")
             self._hardware_tick(fresh)
+        else:
+            self.command_age.period(now, fresh)
+            if not fresh and self.command_wall is not None:
+                self.counters["command_timeouts"] += 1
+                self.problem = (f"command older than {self.config.command_timeout} s at "
+                                f"t={self.sim.t:.3f}: zero torque applied")
+                self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
+            self._advance(self.command if fresh else np.zeros(self.sim.n))
+        if not self.finished.done():        # (the last period waits for the recorder)
+            self._count_overrun(time.monotonic() - now)
+
+    def _take_commands(self):
+        """Take the commands that arrived since the last callback, before the period uses one.
+
+        After a period that outlasted the control period (a render) the timer is due at
+        once, and an executor runs a due timer before the subscriptions of the same
+        wake-up (rclpy's order): the command answering the state just published would be
+        left for the period after, one period late, on top of the render's own wait.
+        """
+        sub = self.command_sub
+        with sub.handle:
+            while True:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    return
+                self._on_command(taken[0])
+
+    def _count_overrun(self, seconds):
+        """Count a period whose work outlasted the control period; warn when most of a second's do.
+
+        One such period now and then (a page fault, another process) only delays the next
+        one; most of them, second after second, make the simulation slower than real time
+        (rendering a picture at every period): warned of, at most every 10 s.
+        """
+        period = self.config.control_period
+        self.longest_period = max(self.longest_period, seconds)
+        window = self.overrun_window
+        window[0] += 1
+        if seconds > period:
+            self.counters["overrun_periods"] += 1
+            window[1] += 1
+            window[2] = max(window[2], seconds)
+        if window[0] * period < 1.0:
             return
-        self.command_age.period(now, fresh)
-        if not fresh and self.command_wall is not None:
-            self.counters["command_timeouts"] += 1
-            self.problem = (f"command older than {self.config.command_timeout} s at "
-                            f"t={self.sim.t:.3f}: zero torque applied")
-            self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
-        self._advance(self.command if fresh else np.zeros(self.sim.n))
+        if window[1] > OVERRUN_WARNING * window[0]:
+            self.get_logger().warning(
+                f"realtime: {window[1]} of the last {window[0]} periods took longer than the "
+                f"control period ({period * 1e3:g} ms; longest {window[2] * 1e3:.1f} ms of wall "
+                "time): the simulation runs slower than real time"
+                + (", most of it rendering the camera's picture (a lower sim_node.camera_rate "
+                   "renders fewer)" if self.rendered else ""),
+                throttle_duration_sec=10.0)
+        window[:] = [0, 0, 0.0]
 
     def _hardware_tick(self, fresh):
         """Apply the hardware's latest command, or hold the arm on its brakes without one."""
@@ -496,11 +556,24 @@ class SimNode(Node):
             f"{c['frame_delivery_timeouts']} frame delivery timeouts, "
             f"{c['detector_timeouts']} detector timeouts, "
             f"{c['held_periods']} periods held on the brakes"
+            + ("" if self.lockstep else
+               f", {c['overrun_periods']} periods longer than the control period (longest "
+               f"{self.longest_period * 1e3:.1f} ms)")
             + ("" if self.command_age is None else "; " + self.command_age.summary()))
         self.finished.set_result(True)
 
     # -- outputs -----------------------------------------------------------------
     def _publish_measurement(self):
+        if self.rendered and not self.lockstep:
+            # realtime: the joint state first, then the picture (rendered after it, of the
+            # same state): the controller computes its command while the picture renders,
+            # and the frame reaches it a period later, stamped with its capture time
+            meas = self.sim.measure(defer_picture=True)
+            self._publish_state(meas)
+            meas = self.measurement = self.sim.render_deferred(meas)
+            for topic, msg in m.camera_outputs(self.msgs, meas, self.sim.camera):
+                self.publishers_by_topic[topic].publish(msg)
+            return
         meas = self.measurement = self.sim.measure()
         if self.rendered:
             for topic, msg in m.camera_outputs(self.msgs, meas, self.sim.camera):
