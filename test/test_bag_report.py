@@ -337,3 +337,26 @@ def test_a_silent_topic_is_not_drawn_across():
     np.testing.assert_array_equal(t_drawn[~np.isnan(drawn[:, 0])], t)
     regular = values[:100]
     assert _broken(t[:100], regular)[1] is regular                # nothing to break
+
+
+def test_a_backlog_keeps_its_stamps_and_lost_messages_are_named(noisy_run, tmp_path):
+    """Arrays received 12 ms (2.4 periods) after their partners; then the last 50 lost."""
+    out, _ = noisy_run
+    original = read_bag(out / "run.mcap")
+    late = _rewrite(out / "run.mcap", tmp_path / "late", StoragePlugin.MCAP, {
+        "/controller_node/estimated_depth": 12_000_000})
+    rec = read_bag(late)
+    # as many as their partner's: one for one, whatever the receive times say
+    np.testing.assert_array_equal(rec.signals["/controller_node/estimated_depth"].t,
+                                  rec.signals["/controller_node/observed"].t)
+    assert "lost_messages" not in bag_figures(rec)
+    lost = _rewrite(out / "run.mcap", tmp_path / "lost", StoragePlugin.MCAP,
+                    drop=lambda topic, k: topic == "/controller_node/estimated_depth" and k >= 350)
+    figures = bag_figures(read_bag(lost))
+    assert figures["lost_messages"] == {"/controller_node/estimated_depth": 50}
+    assert ("/controller_node/estimated_depth: 50 message(s) fewer than "
+            "/controller_node/observed" in "\n".join(report_lines(figures)))
+    # the depth error at the last estimate's stamp (1.745 s), not the true depth's last
+    z_hat = original.signals["/controller_node/estimated_depth"].values[349]
+    z = original.signals["/sim_node/true_depth"].values[349]
+    assert figures["final_depth_error"] == pytest.approx(float((z_hat - z)[0]), abs=1e-12)

@@ -33,8 +33,10 @@ Times are header stamps in seconds: as they are when they are simulated time
 (under 10^6 s: a simulator's clock starts at 0), else from the first joint
 state (a real arm's wall clock).  A Float64MultiArray has no header: it gets
 the stamp of the message its node published with it (``~/observed`` for the
-controller's, ``/joint_states`` for the simulator's), matched by the time the
-recorder received them.  Those receive times (the recorder's clock) also give
+controller's, ``/joint_states`` for the simulator's): one for one when the two
+topics hold as many messages, else matched by the time the recorder received
+them (``lost_messages`` names an array topic with fewer messages than the one it is
+always published with).  Those receive times (the recorder's clock) also give
 each topic's largest gap as the recorder saw it: a simulator or controller
 that stalls in real time keeps its stamps regular, not its arrivals.
 """
@@ -68,6 +70,9 @@ DIAGNOSTICS = "/diagnostics"
 STAMPED_WITH = {ESTIMATED_DEPTH: (OBSERVED, TRACKING_ERROR, JOINT_STATES),
                 PARAMETERS: (OBSERVED, TRACKING_ERROR, JOINT_STATES),
                 TRUE_DEPTH: (JOINT_STATES,), COMMANDS: (EFFORT_COMMAND, JOINT_STATES)}
+# of those, the ones always published one for one with their first partner (the same call):
+# fewer of them in a bag means the recorder lost some
+ONE_FOR_ONE = {ESTIMATED_DEPTH: OBSERVED, PARAMETERS: OBSERVED, COMMANDS: EFFORT_COMMAND}
 SIMULATED_BELOW_NS = 10 ** 15    # stamps under 10^6 s are simulated time (they start at 0)
 READ = (JOINT_STATES, FEATURES, COMMANDS, TRUE_DEPTH, DESIRED, OBSERVED, TRACKING_ERROR,
         ESTIMATED_DEPTH, PARAMETERS, EFFORT_COMMAND, DIAGNOSTICS)
@@ -135,7 +140,16 @@ def _stack(topic, rows, t0_ns):
 
 
 def _stamp_by_partner(signal, partner):
-    """Stamps for an unstamped signal: those of ``partner``'s messages received nearest."""
+    """Stamps for an unstamped signal, from ``partner``'s messages published with it.
+
+    As many messages as the partner: one for one, in order (a topic's messages reach
+    the recorder in the order they were published).  Otherwise (a partner at another
+    rate, or messages lost): the partner's message received nearest, which a recorder
+    that received a backlog all at once can get wrong.
+    """
+    if len(signal.received) == len(partner.received):
+        signal.t = partner.t.copy()
+        return
     order = np.argsort(partner.received, kind="stable")
     received = partner.received[order]
     at = np.searchsorted(received, signal.received)
@@ -298,9 +312,18 @@ def bag_figures(rec, window=RMS_WINDOW_S):
         z_hat = sig[ESTIMATED_DEPTH].values
         figures["min_estimated_depth"] = float(np.nanmin(z_hat))
         if TRUE_DEPTH in sig:
-            error = z_hat[-1] - sig[TRUE_DEPTH].values[-1]
+            # at the estimate's last stamp (the two topics may end apart: other rates, or
+            # a recorder that lost the last messages of one)
+            last, true = times[ESTIMATED_DEPTH][-1], sig[TRUE_DEPTH]
+            error = z_hat[-1] - true.values[int(np.nanargmin(np.abs(true.t - last)))] \
+                if np.isfinite(last) and np.isfinite(true.t).any() else z_hat[-1] - true.values[-1]
             figures["final_depth_error"] = (float(error[0]) if error.size == 1
                                             else error.tolist())
+    lost = {topic: len(sig[partner].t) - len(sig[topic].t)
+            for topic, partner in ONE_FOR_ONE.items()
+            if topic in sig and partner in sig and len(sig[topic].t) < len(sig[partner].t)}
+    if lost:
+        figures["lost_messages"] = lost
     figures["diagnostics"] = diagnostics_figures(rec.diagnostics)
     return figures
 
@@ -390,6 +413,10 @@ def report_lines(figures):
         lines.append(f"{what}: {figures[key]} at {figures[f'{key}_rate_hz']:.1f} Hz, {stamps}; "
                      f"as received, largest gap {_ms(received)} (before "
                      f"t={figures[f'{key}_largest_received_gap_at_s']:.3f} s)")
+    for topic, count in figures.get("lost_messages", {}).items():
+        lines.append(f"{topic}: {count} message(s) fewer than {ONE_FOR_ONE[topic]}, published "
+                     f"with it one for one: the recorder lost them (stamps matched by receive "
+                     f"time)")
     if "joint_states_without_command" in figures:
         lines.append(f"joint states without a command answering them: "
                      f"{figures['joint_states_without_command']} of {figures['joint_states']}")
