@@ -116,8 +116,9 @@ command at every cycle, a command whose torques differ from the previous one
 (so a new command bit-identical to the one before, a torque held at its
 limit, is not seen as new there).  A period whose work outlasts the control
 period (rendering a 640x480 picture at every 5 ms period here) is counted
-(``overrun_periods``), warned of and stated at the end: the simulation then runs
-slower than real time.
+(``overrun_periods``) and stated at the end; a second of simulated time that takes
+more than 1/0.9 s of wall time is warned of: the simulation runs slower than real
+time.
 
 The per-period messages (the frame, /clock, /joint_states, ~/true_depth, and the
 commands in realtime) are serialized and read by :mod:`..recording.cdr`, the
@@ -170,7 +171,7 @@ START_POLL = 0.05          # s of wall time between two checks for the subscribe
 START_SETTLE = 0.25        # s of wall time everything must stay connected before the start
 WAITING_LOG_PERIOD = 5.0   # s of wall time between two "waiting for ..." lines
 PUBLISH_RATE = 100.0       # Hz of sim time: /clock and ~/true_depth in realtime
-OVERRUN_WARNING = 0.5      # of a second's periods longer than the period: warned of (realtime)
+REALTIME_WARNING = 0.9     # realtime: warned of when a second's periods run slower than this
 # the controller_manager's ~/activity: published on every change, reliable and transient local
 ACTIVITY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -289,7 +290,8 @@ class SimNode(Node):
             # periods whose work (the step, the render, the publishing) outlasted the period
             self.counters["overrun_periods"] = 0
             self.longest_period = 0.0       # s of wall time
-            self.overrun_window = [0, 0, 0.0]   # about 1 s: periods, overruns, longest [s]
+            # about 1 s: periods, overruns, the longest [s], the first one's start [s of wall]
+            self.overrun_window = [0, 0, 0.0, 0.0]
         self.problem = ""
         self.last_level, self.t_last_diagnostics = None, None
         self.wall_start = None
@@ -448,7 +450,7 @@ class SimNode(Node):
                 self.get_logger().warning(self.problem, throttle_duration_sec=1.0)
             self._advance(self.command if fresh else np.zeros(self.sim.n))
         if not self.finished.done():        # (the last period waits for the recorder)
-            self._count_overrun(time.monotonic() - now)
+            self._count_overrun(now, time.monotonic() - now)
 
     def _take_commands(self):
         """Take the commands that arrived since the last callback, before the period uses one.
@@ -466,16 +468,20 @@ class SimNode(Node):
                     return
                 self._on_command(taken[0])
 
-    def _count_overrun(self, seconds):
-        """Count a period whose work outlasted the control period; warn when most of a second's do.
+    def _count_overrun(self, start, seconds):
+        """Count a period whose work outlasted the control period; warn when behind real time.
 
-        One such period now and then (a page fault, another process) only delays the next
-        one; most of them, second after second, make the simulation slower than real time
-        (rendering a picture at every period): warned of, at most every 10 s.
+        ``start``: the period's start [s of wall time], ``seconds``: its work.  One long
+        period now and then (a page fault, another process) only delays the next one; when
+        a second of simulated time takes more than 1 / REALTIME_WARNING of wall time (a
+        render at every period, or a long one at each frame) the simulation runs slower than
+        real time: warned of, at most every 10 s, with how far and why.
         """
         period = self.config.control_period
         self.longest_period = max(self.longest_period, seconds)
         window = self.overrun_window
+        if window[0] == 0:
+            window[3] = start
         window[0] += 1
         if seconds > period:
             self.counters["overrun_periods"] += 1
@@ -483,15 +489,17 @@ class SimNode(Node):
             window[2] = max(window[2], seconds)
         if window[0] * period < 1.0:
             return
-        if window[1] > OVERRUN_WARNING * window[0]:
+        simulated, wall = window[0] * period, start + seconds - window[3]
+        if simulated < REALTIME_WARNING * wall:
             self.get_logger().warning(
-                f"realtime: {window[1]} of the last {window[0]} periods took longer than the "
-                f"control period ({period * 1e3:g} ms; longest {window[2] * 1e3:.1f} ms of wall "
-                "time): the simulation runs slower than real time"
-                + (", most of it rendering the camera's picture (a lower sim_node.camera_rate "
+                f"realtime: {simulated:.3g} s of simulated time took {wall:.3g} s of wall time "
+                f"({simulated / wall:.2f}x real time): {window[1]} of its {window[0]} periods "
+                f"took longer than the control period ({period * 1e3:g} ms; longest "
+                f"{window[2] * 1e3:.1f} ms)"
+                + (", rendering the camera's picture most of it (a lower sim_node.camera_rate "
                    "renders fewer)" if self.rendered else ""),
                 throttle_duration_sec=10.0)
-        window[:] = [0, 0, 0.0]
+        window[:] = [0, 0, 0.0, 0.0]
 
     def _hardware_tick(self, fresh):
         """Apply the hardware's latest command, or hold the arm on its brakes without one."""
