@@ -33,6 +33,7 @@ module.
 import contextlib
 import logging
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -44,6 +45,7 @@ from visual_adaptive_servo.control.controller import EstimatorState, Gains, cont
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAPER_CONFIG = os.path.join(ROOT, "config", "paper_3dof.yaml")
+PACKAGE = "visual_adaptive_servo"
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -136,6 +138,25 @@ def draw_discs(height, width, discs, background=(40, 40, 40), supersample=16):
         rows, cols = np.nonzero(inside)
         centroids.append([xs[cols].mean(), ys[rows].mean()])
     return np.rint(picture).astype(np.uint8), np.array(centroids)
+
+
+def installed_share(ros2_command=False):
+    """The package's share folder in the ament index; the calling module skipped without it.
+
+    For the modules that launch the installed package (``colcon build`` it first); with
+    ``ros2_command`` also skipped when the ``ros2`` command is not on the PATH.  Call it at
+    module level, after ``pytest.importorskip`` of what the module needs from ROS.
+    """
+    from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+    try:
+        share = get_package_share_directory(PACKAGE)
+    except PackageNotFoundError:
+        pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
+                    allow_module_level=True)
+    if ros2_command and shutil.which("ros2") is None:
+        pytest.skip("the ros2 command is not on the PATH", allow_module_level=True)
+    return share
 
 
 @contextlib.contextmanager

@@ -25,7 +25,6 @@ installed package (colcon build); skipped otherwise.
 
 import os
 import re
-import shutil
 import signal
 import subprocess
 import time
@@ -34,19 +33,10 @@ import pytest
 
 pytest.importorskip("launch_testing", reason="needs ROS 2 (ros2 launch)")
 
-from ament_index_python.packages import (
-    PackageNotFoundError,
-    get_package_share_directory,
-)
 
-PACKAGE = "visual_adaptive_servo"
-try:
-    get_package_share_directory(PACKAGE)
-except PackageNotFoundError:
-    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
-                allow_module_level=True)
-if shutil.which("ros2") is None:
-    pytest.skip("the ros2 command is not on the PATH", allow_module_level=True)
+from conftest import installed_share, PACKAGE
+
+installed_share(ros2_command=True)
 
 
 def _alive(pid):

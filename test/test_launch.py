@@ -32,21 +32,14 @@ pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
 import launch_testing.actions
 import launch_testing.asserts
 import yaml
-from ament_index_python.packages import (
-    PackageNotFoundError,
-    get_package_share_directory,
-)
 from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 
 from launch import LaunchDescription
 
-PACKAGE = "visual_adaptive_servo"
-try:
-    SHARE = get_package_share_directory(PACKAGE)
-except PackageNotFoundError:
-    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
-                allow_module_level=True)
+from conftest import installed_share
+
+SHARE = installed_share()
 
 
 def _short_params_file():

@@ -42,30 +42,21 @@ pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
 import launch_testing.actions
 import launch_testing.asserts
 import yaml
-from ament_index_python.packages import (
-    PackageNotFoundError,
-    get_package_share_directory,
-)
 from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 
-from conftest import bag_counts, bag_messages
+from conftest import bag_counts, bag_messages, installed_share
 from launch import LaunchDescription
 from visual_adaptive_servo.recording import messages as m
 from visual_adaptive_servo.recording.bag_report import bag_figures, read_bag
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.runner import run_scenario
 
-PACKAGE = "visual_adaptive_servo"
 DURATION = 2.0
 STEPS = 400
 STALL = 0.5      # s of wall time the recorder is stopped, from the start of the simulation
 RECORDER_GRACE = 1.0    # s: servo.launch.py's, from the controller's exit to the shutdown
-try:
-    SHARE = get_package_share_directory(PACKAGE)
-except PackageNotFoundError:
-    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
-                allow_module_level=True)
+SHARE = installed_share()
 
 
 def _short_params_file(folder):

@@ -30,7 +30,6 @@ Needs ``ros2`` and the installed package (colcon build); skipped otherwise.
 """
 
 import os
-import shutil
 import subprocess
 
 import numpy as np
@@ -38,24 +37,13 @@ import pytest
 
 pytest.importorskip("launch_testing", reason="needs ROS 2 (ros2 launch)")
 
-from ament_index_python.packages import (
-    PackageNotFoundError,
-    get_package_share_directory,
-)
 
-from conftest import bag_messages, PAPER_CONFIG
+from conftest import bag_messages, installed_share, PACKAGE, PAPER_CONFIG
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording import messages as m
 
-PACKAGE = "visual_adaptive_servo"
 DURATION = 2.0
-try:
-    get_package_share_directory(PACKAGE)
-except PackageNotFoundError:
-    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
-                allow_module_level=True)
-if shutil.which("ros2") is None:
-    pytest.skip("the ros2 command is not on the PATH", allow_module_level=True)
+installed_share(ros2_command=True)
 
 
 def test_a_realtime_rendered_launch_applies_each_command_in_the_next_period_and_tracks(
