@@ -118,7 +118,8 @@ def _untracked(summary):
 
     Every sample rejected (held, then the fallback), or none since ``UNTRACKED_END_S``
     before the end: a camera whose points were never or no longer seen, joint states
-    refused, ...; ``vas -v run`` logs each rejection.
+    refused, ...; the warnings above it name each kind of rejection (``vas -v run``: the
+    wait for a first frame too).
     """
     if summary["diverged"] or not summary.get("steps"):
         return ""
@@ -134,8 +135,8 @@ def _untracked(summary):
                    f"{summary['frames_without_features_by_reason']}")
     when = ("every sample was rejected" if not math.isfinite(last)
             else f"no sample tracked after t={last:.3f} s of {end:.3f} s")
-    return (f"{when} (held, then the fallback torque){frames}; `vas -v run ...` logs each "
-            f"rejection")
+    return (f"{when} (held, then the fallback torque){frames}; the warnings above name each "
+            f"kind of rejection (`vas -v run ...`: the wait for a first frame too)")
 
 
 def cmd_robustness(args):

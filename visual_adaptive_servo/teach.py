@@ -99,7 +99,7 @@ def check_joint_limits(chain, q0, amplitudes, headroom=HEADROOM):
 
 
 def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0,
-          headroom=None):
+          headroom=HEADROOM):
     """Move the simulated arm along the taught path; return (t (N,), pixels (N, 2m)).
 
     Raises ValueError when a joint would pass its URDF position limits or come within
@@ -118,8 +118,7 @@ def teach(sim_config, duration=20.0, amplitudes=0.25, cycles=None, rate=100.0,
         raise ValueError(f"cycles: whole numbers >= 1 per joint, got {list(cycles)}")
     if not duration > 0.0 or not rate > 0.0:
         raise ValueError(f"duration and rate must be > 0, got {duration} and {rate}")
-    check_joint_limits(arm.chain, sim_config.initial_positions, amplitudes,
-                       HEADROOM if headroom is None else headroom)
+    check_joint_limits(arm.chain, sim_config.initial_positions, amplitudes, headroom)
     path = joint_path(sim_config.initial_positions, amplitudes, cycles, duration)
     times = np.linspace(0.0, duration, int(round(duration * rate)) + 1)
     camera = sim_config.camera
