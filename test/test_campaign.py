@@ -31,6 +31,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import tempfile
 
 import numpy as np
 import pytest
@@ -50,6 +51,7 @@ from visual_adaptive_servo.config.files import apply_overrides
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.config.sim import SIM_PARAMS
 from visual_adaptive_servo.control.trajectory import SinusoidTrajectory
+from visual_adaptive_servo.runner import run_scenario
 from sim_bridge.simulator import Simulator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -456,6 +458,44 @@ def test_a_worker_killed_mid_run_is_replaced_and_the_run_retried(tmp_path):
     assert killed and sorted(rows) == [0, 1, 2, 3]
     assert all(r["status"] == "finished" for r in rows.values())
     assert [rows[i]["attempts"] for i in range(4)] == [1, 2, 1, 1]
+
+
+def die_in_the_middle_of_run_1(run):
+    """Run 1's worker dies at its 100th period, inside the run; the others run."""
+    if run.index == 1:
+        from visual_adaptive_servo.runner import Simulator
+
+        apply, periods = Simulator.apply, []
+
+        def apply_then_die(self, tau):
+            periods.append(1)
+            if len(periods) == 100:
+                os._exit(1)
+            return apply(self, tau)
+        Simulator.apply = apply_then_die
+    return execute_run(run)
+
+
+def test_a_worker_that_dies_in_a_run_leaves_no_scratch_folder(tmp_path, monkeypatch):
+    scratch = tmp_path / "scratch"         # the workers' temporary folder
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    spec = small_spec(str(tmp_path))
+    run_campaign(spec, str(tmp_path / "out"), workers=2, run_fn=die_in_the_middle_of_run_1,
+                 progress=False)
+    rows = {r["id"]: r for r in read_rows(str(tmp_path / "out" / CSV_NAME), load_spec(spec))}
+    assert rows[1]["reason"] == "worker died with exit code 1, twice"
+    assert not [p.name for p in scratch.iterdir() if p.name.startswith("vas-")]
+
+
+def test_a_run_without_a_folder_writes_nothing_and_records_nothing():
+    scenario = load_scenario(PAPER)
+    with pytest.raises(ValueError, match="out_dir None writes nothing: record and plots must"):
+        run_scenario(scenario, None, duration=0.1, progress=False, record=True, plots=False)
+    summary = run_scenario(scenario, None, duration=0.1, progress=False, record=False,
+                           plots=False)
+    assert summary["steps"] == 20 and summary["outputs"] == []
 
 
 def test_workers_import_this_package_whatever_the_working_directory(tmp_path):

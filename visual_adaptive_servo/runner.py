@@ -142,8 +142,9 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     Parameters
     ----------
     scenario : config.Scenario
-    out_dir : str
-        Created if needed.
+    out_dir : str or None
+        Created if needed; None: nothing is written, the summary is only returned
+        (campaign runs: no scratch folder to leave behind, no CSV to write).
     duration : float, optional
         Simulated seconds; default ``sim_node.duration`` (30 s if that is 0).
     progress : bool, optional
@@ -160,7 +161,12 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     announce : callable, optional
         Called with the start-up report (text) before the run starts (``vas run``: print).
     """
-    os.makedirs(out_dir, exist_ok=True)
+    if out_dir is None:
+        if record or plots:
+            raise ValueError("run_scenario: out_dir None writes nothing: record and plots "
+                             "must be False")
+    else:
+        os.makedirs(out_dir, exist_ok=True)
     duration = duration or scenario.sim.duration or 30.0
     period = scenario.sim.control_period
     steps = int(round(duration / period))
@@ -276,8 +282,10 @@ def run_scenario(scenario, out_dir, duration=None, progress=None, record=True, p
     summary = summarize(data, series.status, wall, diverged, reason, counters, period)
     summary.update(interrupted=interrupted, error=error, steps=series.count,
                    duration_requested_s=duration, control_period_s=period,
-                   outputs=["summary.json", "timeseries.csv"], start_report=start)
-    write_outputs(out_dir, data, series.status, model, summary, record, plots)
+                   outputs=[] if out_dir is None else ["summary.json", "timeseries.csv"],
+                   start_report=start)
+    if out_dir is not None:
+        write_outputs(out_dir, data, series.status, model, summary, record, plots)
     return summary
 
 

@@ -37,7 +37,6 @@ once per campaign, not once per worker or per replacement of a dead one.
 
 from __future__ import annotations
 
-import contextlib
 import faulthandler
 import logging
 import math
@@ -45,7 +44,6 @@ import multiprocessing
 import os
 import signal
 import socket
-import tempfile
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -93,11 +91,12 @@ def execute_run(run, keep_dir=None, figures=FIGURES):
     """The default run function: the run, headless; returns its :data:`FIGURES`.
 
     ``keep_dir``: keep each run's timeseries.csv and summary.json in
-    ``keep_dir/<run index>`` (``vas compare`` plots from them); by default they go to
-    a scratch folder.  ``figures``: the summary.json keys to return (``vas tune`` also
-    reads the count of saturated samples).  A run that diverged also returns why
-    (``DIVERGENCE_REASON``: what crossed its limit and what grew first), which
-    runs.csv keeps in its ``reason`` column.
+    ``keep_dir/<run index>`` (``vas compare`` plots from them); by default nothing is
+    written (a worker killed mid-run leaves no scratch folder behind).  ``figures``:
+    the summary.json keys to return (``vas tune`` also reads the count of saturated
+    samples).  A run that diverged also returns why (``DIVERGENCE_REASON``: what
+    crossed its limit and what grew first), which runs.csv keeps in its ``reason``
+    column.
     """
     from ..config.scenario import load_scenario
     from ..control.registry import controller_factory
@@ -105,11 +104,9 @@ def execute_run(run, keep_dir=None, figures=FIGURES):
 
     scenario = load_scenario(run.base, run.overrides)
     factory = controller_factory(run.controller)
-    folder = (tempfile.TemporaryDirectory(prefix="vas-campaign-") if keep_dir is None
-              else contextlib.nullcontext(os.path.join(keep_dir, f"{run.index:05d}")))
-    with folder as out:
-        summary = run_scenario(scenario, out, duration=run.duration, progress=False,
-                               record=False, plots=False, controller_factory=factory)
+    out = None if keep_dir is None else os.path.join(keep_dir, f"{run.index:05d}")
+    summary = run_scenario(scenario, out, duration=run.duration, progress=False,
+                           record=False, plots=False, controller_factory=factory)
     if summary.get("error"):
         raise RunFailed(summary["error"])
     out = {key: summary.get(key, math.nan) for key in figures}
