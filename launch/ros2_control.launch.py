@@ -76,7 +76,8 @@ from visual_adaptive_servo.config.ros2_control import (
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
-    node_parameters, rate_arguments, rates, recording_folder, sim_duration, unless_failed
+    node_parameters, rate_arguments, rates, recording_folder, removed_on_shutdown, \
+    sim_duration, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -150,6 +151,8 @@ def _nodes(context):
     ]
     shutdown = EmitEvent(event=Shutdown(reason="sim_node exited"))
     actions = [
+        # the controller_manager's parameter file, written above, goes when the launch ends
+        removed_on_shutdown(handle.name),
         # the effort controller would go on sending the last command of a stopped controller
         RegisterEventHandler(OnProcessExit(target_action=controller_node, on_exit=_unspawn)),
         LogInfo(msg=f"{os.path.basename(params_file)} through ros2_control: controller_manager "

@@ -64,7 +64,7 @@ from launch.actions import (
     RegisterEventHandler,
     TimerAction,
 )
-from launch.event_handlers import OnProcessExit, OnShutdown
+from launch.event_handlers import OnProcessExit
 from launch.events import matches_action, Shutdown
 from launch.events.process import SignalProcess
 from launch.substitutions import LaunchConfiguration
@@ -72,7 +72,7 @@ from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
     node_parameters, rate_arguments, rates, recorder_qos_overrides, recording_folder, \
-    sim_duration, unless_failed
+    removed_on_shutdown, sim_duration, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 # s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
@@ -143,8 +143,7 @@ def _nodes(context):
             # the file, written now, is removed when the launch shuts down
             overrides = recorder_qos_overrides(topics)
             cmd += ["--qos-profile-overrides-path", overrides]
-            actions.append(RegisterEventHandler(OnShutdown(
-                on_shutdown=lambda event, context, path=overrides: _remove(path))))
+            actions.append(removed_on_shutdown(overrides))
         if camera_mode == "rendered" and record_pictures:
             topics += sorted(CAMERA_TOPICS)
             cmd += ["--storage-preset-profile", "zstd_fast"]
@@ -152,14 +151,6 @@ def _nodes(context):
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
     return nodes + actions
-
-
-def _remove(path):
-    """Delete a file the launch wrote, if it is still there (no actions to run)."""
-    try:
-        os.remove(path)
-    except FileNotFoundError:
-        pass
 
 
 def generate_launch_description():

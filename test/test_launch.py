@@ -21,6 +21,7 @@ have exited with status 0.  Skipped
 without launch_testing or when the package is not installed (colcon build).
 """
 
+import atexit
 import os
 import tempfile
 import unittest
@@ -49,6 +50,7 @@ def _short_params_file():
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False,
                                      encoding="utf-8") as handle:
         yaml.safe_dump(params, handle)
+    atexit.register(os.remove, handle.name)
     return handle.name
 
 

@@ -28,7 +28,9 @@ figures of the two bags.  Skipped without launch_testing or when the package
 is not installed (colcon build).
 """
 
+import atexit
 import os
+import shutil
 import signal
 import tempfile
 import time
@@ -72,6 +74,7 @@ def _short_params_file(folder):
 @pytest.mark.launch_test
 def generate_test_description():
     folder = tempfile.mkdtemp(prefix="vas-record-")
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
     params_file, bag_dir = _short_params_file(folder), os.path.join(folder, "bag")
     overrides_before = _overrides_files()
     return LaunchDescription([

@@ -25,6 +25,7 @@ joint_state_topic_hardware_interface in the ament index; that skip is in the
 test, so that the other test files of the session still run).
 """
 
+import atexit
 import os
 import tempfile
 import unittest
@@ -78,6 +79,7 @@ def _short_params_file():
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False,
                                      encoding="utf-8") as handle:
         yaml.safe_dump(params, handle)
+    atexit.register(os.remove, handle.name)
     return handle.name
 
 
@@ -88,7 +90,8 @@ def generate_test_description():
         # (skipped) tests run, and launch_testing fails them ("Launch stopped before the
         # active tests finished")
         return LaunchDescription([ExecuteProcess(cmd=["sleep", "60"]),
-                                  launch_testing.actions.ReadyToTest()])
+                                  launch_testing.actions.ReadyToTest()]), {"before": set()}
+    before = _manager_files()
     return LaunchDescription([
         SetEnvironmentVariable("ROS_DOMAIN_ID", str(200 + os.getpid() % 30)),
         IncludeLaunchDescription(
@@ -96,7 +99,13 @@ def generate_test_description():
                                                        "ros2_control.launch.py")),
             launch_arguments={"params_file": _short_params_file()}.items()),
         launch_testing.actions.ReadyToTest(),
-    ])
+    ]), {"before": before}
+
+
+def _manager_files():
+    """The controller_manager parameter files ros2_control.launch.py wrote, now there."""
+    return {name for name in os.listdir(tempfile.gettempdir())
+            if name.startswith("vas_ros2_control_") and name.endswith(".yaml")}
 
 
 class TestChain(unittest.TestCase):
@@ -124,3 +133,8 @@ class TestShutdown(unittest.TestCase):
         if MISSING:
             self.skipTest(SKIP_REASON)
         launch_testing.asserts.assertExitCodes(proc_info)
+
+    def test_the_controller_manager_file_is_removed_at_shutdown(self, before):
+        if MISSING:
+            self.skipTest(SKIP_REASON)
+        self.assertEqual(_manager_files() - before, set())

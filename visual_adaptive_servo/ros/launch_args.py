@@ -23,7 +23,8 @@ import os
 import tempfile
 
 import yaml
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, RegisterEventHandler
+from launch.event_handlers import OnShutdown
 from launch.substitutions import LaunchConfiguration
 
 from .main import (DEFAULT_EXECUTOR, EXECUTOR_DESCRIPTION, EXECUTORS, REALTIME_DESCRIPTION,
@@ -90,6 +91,20 @@ def recorder_qos_overrides(topics, folder=None):
     with open(handle, "w", encoding="utf-8") as stream:
         yaml.safe_dump(overrides, stream)
     return path
+
+
+def removed_on_shutdown(path):
+    """An action that deletes the file ``path`` the launch wrote when the launch shuts down."""
+    return RegisterEventHandler(OnShutdown(
+        on_shutdown=lambda event, context: _remove(path)))
+
+
+def _remove(path):
+    """Delete a file the launch wrote, if it is still there (no actions to run)."""
+    try:
+        os.remove(path)
+    except FileNotFoundError:
+        pass
 
 
 def unless_failed(on_exit):
