@@ -16,11 +16,12 @@
 
 Each control period: :meth:`Simulator.measure` returns the joint state and the
 camera frame published now, if any (camera rate, noise and latency applied,
-stamped with its capture time), then :meth:`Simulator.apply` holds a torque
-over the physics sub-steps (or :meth:`Simulator.hold` holds the arm still on its
-brakes when there is no command).  Commands are validated here too:
-a command of the wrong length or with NaN/inf is refused and zero torque is
-applied instead, with the reason returned to the caller.
+stamped with its capture time, or ``camera_stamp_delay`` after it), then
+:meth:`Simulator.apply` holds a torque over the physics sub-steps (or
+:meth:`Simulator.hold` holds the arm still on its brakes when there is no
+command).  Commands are validated here too: a command of the wrong length or
+with NaN/inf is refused and zero torque is applied instead, with the reason
+returned to the caller.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class Measurement:
     q: np.ndarray
     qd: np.ndarray
     tau_applied: np.ndarray
-    feature_stamp: float | None      # capture time of the frame published now
+    feature_stamp: float | None      # stamp of the frame published now (capture + stamp delay)
     pixels: np.ndarray | None        # (2m,) px, None when no frame is published now
     true_depth: np.ndarray           # (m,) depth at time t (ground truth, plots only)
     true_pixels: np.ndarray          # (2m,) noiseless pixels at time t
@@ -142,6 +143,7 @@ class Simulator:
                 *((None, None) if self.tag is None else (self.tag.body, self._plate_outline)),
                 window_bodies=(self.plant.body,))
             self._exposure_times = []
+        self.stamp_delay = config.camera_stamp_delay
         self.feature_camera = FeatureCamera(self.camera, config.pixel_noise_std,
                                             config.camera_rate, config.camera_latency, config.seed)
         self.plant.reset(config.initial_positions, config.initial_velocities)
@@ -181,7 +183,8 @@ class Simulator:
         if frame is not None and self.faults.drops(frame.stamp, self.feature_camera.published):
             frame = None
         if frame is not None:
-            stamp, frame_truth = frame.stamp, frame.true_pixels
+            # (camera_stamp_delay: the stamp a driver that stamps on reception writes)
+            stamp, frame_truth = frame.stamp + self.stamp_delay, frame.true_pixels
             if self.rendered:
                 image = frame.image
             elif frame.visible:

@@ -30,6 +30,7 @@ from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import AdaptiveVisualTracker, EstimatorState
 from visual_adaptive_servo.control.prediction import FramePredictor
 from visual_adaptive_servo.runner import run_scenario
+from visual_adaptive_servo.schema import ConfigError
 
 Q0 = np.array([1.0807, 0.5756, -0.5000])
 DT = 0.001
@@ -163,3 +164,40 @@ def test_slow_late_camera_is_tracked_with_compensation_and_lost_without(tmp_path
     np.testing.assert_allclose(results[True]["frame_age_max_s"], 0.05)
     assert (results[False]["diverged"] or results[False]["final_rms_true_error_px"]
             > 5 * results[True]["final_rms_true_error_px"])
+
+
+def test_a_camera_that_stamps_frames_on_reception_is_told_to_the_controller(tmp_path):
+    """Stamps camera_stamp_delay after the capture: told, the run is the capture-stamped one.
+
+    Paper arm and gains, 1 ms control, a 30 Hz camera 33 ms late whose driver stamps each
+    frame when it receives it (``sim_node.camera_stamp_delay`` = the latency).  Not told,
+    the controller applies every frame 33 ms after the scene it shows and tracks that much
+    behind the trajectory.
+    """
+    camera = ["sim_node.control_period=0.001", "controller_node.sample_time=0.001",
+              "sim_node.camera_rate=30.0", "sim_node.camera_latency=0.033",
+              "controller_node.camera_rate=30.0", "controller_node.camera_latency=0.033"]
+    results = {}
+    for name, sim_delay, told in (("capture", 0.0, 0.0), ("told", 0.033, 0.033),
+                                  ("not told", 0.033, 0.0)):
+        scenario = load_scenario(PAPER_CONFIG, camera + [
+            f"sim_node.camera_stamp_delay={sim_delay}",
+            f"controller_node.camera_stamp_delay={told}"])
+        results[name] = run_scenario(scenario, str(tmp_path / name.replace(" ", "_")),
+                                     duration=10.0, progress=False, record=False, plots=False)
+    capture, told, not_told = results["capture"], results["told"], results["not told"]
+    assert not capture["diverged"] and capture["final_rms_true_error_px"] < 0.1
+    for key in ("final_rms_true_error_px", "max_abs_torque", "frame_age_max_s"):
+        np.testing.assert_allclose(told[key], capture[key], rtol=1e-9, err_msg=key)
+    assert not_told["final_rms_true_error_px"] > 5 * capture["final_rms_true_error_px"]
+    # the frames' age is measured from the capture time the controller takes: told, the
+    # latency; not told, a stamp on reception says none
+    np.testing.assert_allclose(capture["frame_age_max_s"], 0.033, atol=1e-9)
+    np.testing.assert_allclose(not_told["frame_age_max_s"], 0.0, atol=1e-9)
+
+
+def test_a_stamp_after_the_frame_is_published_is_refused():
+    with pytest.raises(ConfigError, match=r"sim_node.camera_stamp_delay: at most "
+                                          r"camera_latency \(0.02 s.*got 0.03"):
+        load_scenario(PAPER_CONFIG, ["sim_node.camera_latency=0.02",
+                                     "sim_node.camera_stamp_delay=0.03"])

@@ -88,6 +88,11 @@ CONTROLLER_PARAMS = (
     ParamSpec("camera_latency", 0.05, "float",
               "Latency of the camera, capture to arrival, as the controller should expect it "
               "[s]; sets the derived bandwidths.", 0.0, 10.0),
+    ParamSpec("camera_stamp_delay", 0.0, "float",
+              "Time from a frame's capture to the time its stamp says [s]: the controller "
+              "takes stamp - this as the capture time.  0 when the camera stamps its capture "
+              "time (what sensor_msgs/Image's header.stamp should hold); a driver that stamps "
+              "frames when it receives them: about camera_latency.", 0.0, 10.0),
     ParamSpec("gain_design.delay_bandwidth", 0.15, "float",
               "Derived gamma = this / tau, tau = sample_time + camera_latency + 1/(2 camera_rate) "
               "(the loop's bandwidth times its delay, rad).", 1e-3, 1.0),

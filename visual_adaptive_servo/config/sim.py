@@ -56,6 +56,10 @@ SIM_PARAMS = structure_specs(PAPER_URDF, "base_link", "tip", [0.0, 0.0, 0.0], ""
     ParamSpec("camera_latency", 0.0, "float",
               "Time from a frame's capture to its publication, rounded up to the control period "
               "[s]; the frame is stamped with its capture time.", 0.0, 10.0),
+    ParamSpec("camera_stamp_delay", 0.0, "float",
+              "Time from a frame's capture to the time its stamp says [s]: a camera driver "
+              "that stamps frames when it receives them (at most camera_latency); 0 = the "
+              "capture time, as sensor_msgs/Image's header.stamp should hold.", 0.0, 10.0),
     ParamSpec("seed", 0, "int", "Seed of the pixel noise generator.", 0, 2**31 - 1),
 ) + camera_specs("camera.", "Simulated camera") + (
     ParamSpec("markers.radius", 0.03, "float",
@@ -268,6 +272,10 @@ class SimConfig(ValidatedParams):
         if v["camera_rate"] * v["control_period"] > 1.0 + 1e-9:
             raise ConfigError(f"{section}.camera_rate: at most one frame per control period "
                               f"({1.0 / v['control_period']:g} Hz), got {v['camera_rate']}")
+        if v["camera_stamp_delay"] > v["camera_latency"]:
+            raise ConfigError(f"{section}.camera_stamp_delay: at most camera_latency "
+                              f"({v['camera_latency']} s; a frame cannot be stamped after it is "
+                              f"published), got {v['camera_stamp_delay']}")
         if v["hardware.command_topic"]:
             if v["timing_mode"] != "realtime":
                 raise ConfigError(f"{section}.hardware.command_topic: a ros2_control hardware "

@@ -891,7 +891,8 @@ class AdaptiveVisualTracker:
         x : (2m,) or None
             Pixels of the camera frame that arrived with this sample (None: none did).
         x_stamp : float, optional
-            Capture time of that frame (default t: captured now).
+            The frame's stamp: its capture time plus ``camera_stamp_delay`` (default t:
+            captured now).
 
         Never raises on bad measurements (see the class docstring).
         """
@@ -926,7 +927,8 @@ class AdaptiveVisualTracker:
             self.frames["received"] += 1
             try:
                 frame = x if checked else self._check_feature(x)
-                stamp = t if x_stamp is None else float(x_stamp)
+                stamp = t if x_stamp is None else (float(x_stamp)
+                                                   - self.config["camera_stamp_delay"])
                 if not isfinite(stamp):
                     raise InputError("frame: stamp not finite")
                 if self.compensate:
