@@ -175,8 +175,9 @@ def test_camera_latency_is_the_sim_node_parameter_when_it_exists(tmp_path):
 
 def test_shipped_specs_resolve():
     names = sorted(os.listdir(os.path.join(ROOT, "config", "campaigns")))
-    assert names == ["compare.yaml", "noise_preset_1000.yaml", "noise_preset_sweep.yaml",
-                     "noisy_pixels_iiwa.yaml", "real_camera_iiwa.yaml", "real_camera_panda.yaml",
+    assert names == ["compare.yaml", "late_stamps_paper_urdf.yaml", "noise_preset_1000.yaml",
+                     "noise_preset_sweep.yaml", "noisy_pixels_iiwa.yaml",
+                     "real_camera_iiwa.yaml", "real_camera_panda.yaml",
                      "real_camera_paper_urdf.yaml", "robustness.yaml",
                      "start_and_estimates.yaml"]
     runs = {name: load_spec(os.path.join(ROOT, "config", "campaigns", name)).runs()
@@ -189,6 +190,12 @@ def test_shipped_specs_resolve():
     for name in ("noisy_pixels_iiwa.yaml", "real_camera_iiwa.yaml", "real_camera_panda.yaml",
                  "real_camera_paper_urdf.yaml"):
         assert len(runs[name]) == 100, name
+    # the late stamps: the paper arm's real-camera draws, each in its four cases
+    late, real = runs["late_stamps_paper_urdf.yaml"], runs["real_camera_paper_urdf.yaml"]
+    assert len(late) == 4 * 100
+    for run in late:
+        draw = real[run.index // 4].factors
+        assert {k: run.factors[k] for k in draw} == draw
     compare = runs["compare.yaml"]
     assert len(compare) == 12 * 3 * 5
     assert {r.controller for r in compare} == set(CONTROLLER_NAMES)
