@@ -24,7 +24,7 @@ closed loop itself.
 import numpy as np
 import pytest
 
-from conftest import PAPER_CONFIG
+from conftest import logged_warnings, PAPER_CONFIG
 from visual_adaptive_servo.config.controller import ControllerConfig
 from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.control.controller import AdaptiveVisualTracker, EstimatorState
@@ -201,3 +201,29 @@ def test_a_stamp_after_the_frame_is_published_is_refused():
                                           r"camera_latency \(0.02 s.*got 0.03"):
         load_scenario(PAPER_CONFIG, ["sim_node.camera_latency=0.02",
                                      "sim_node.camera_stamp_delay=0.03"])
+
+
+@pytest.mark.parametrize("sim, told, expected", [
+    (["sim_node.camera_stamp_delay=0.033"], [],
+     # (published at the first 5 ms period after 33 ms: 2 ms after the stamp)
+     "frames are applied 2.0 ms after their stamps (the mean of the first 30), while "
+     "camera_latency says 33 ms: if the camera's driver stamps frames when it receives them, "
+     "set camera_stamp_delay"),
+    (["sim_node.camera_stamp_delay=0.033"], ["controller_node.camera_stamp_delay=0.033"], None),
+    ([], [], None),
+    (["sim_node.camera_latency=0.1"], [],
+     "frames are applied 100.0 ms after their stamps (the mean of the first 30), while "
+     "camera_latency says 33 ms: the derived gains assume the faster camera"),
+])
+def test_frames_older_or_fresher_than_camera_latency_says_are_warned_of(sim, told, expected):
+    """The controller told a 30 Hz camera 33 ms late; the simulated camera as ``sim`` says."""
+    scenario = load_scenario(PAPER_CONFIG, [
+        "sim_node.camera_rate=30.0", "sim_node.camera_latency=0.033",
+        "controller_node.camera_rate=30.0", "controller_node.camera_latency=0.033"]
+        + sim + told)
+    with logged_warnings() as records:
+        run_scenario(scenario, None, duration=1.5, progress=False, record=False, plots=False)
+    ages = [r.getMessage() for r in records if "after their stamps" in r.getMessage()]
+    assert ages == ([] if expected is None else [ages[0]])
+    if expected is not None:
+        assert expected in ages[0]

@@ -56,6 +56,9 @@ WAITING_FOR_CAMERA = "feature x: waiting for the first camera frame"
 INF = float("inf")
 #: how often the joint positions are checked against the URDF's limits [s of sample time]
 LIMIT_CHECK_PERIOD = 0.01
+#: the frames' ages (joint sample time - capture time) are checked against camera_latency
+#: once, over this many applied frames (:meth:`AdaptiveVisualTracker._check_frame_ages`)
+AGE_CHECK_FRAMES = 30
 #: the measured noise moves gamma in steps of at least this (in ln gamma)
 BANDWIDTH_STEP = 0.01
 _NO_PIXELS = np.empty(0)    # x of a sample without a frame, for sample_kernels.inputs_valid
@@ -1009,6 +1012,35 @@ class AdaptiveVisualTracker:
         if age > frames["age_max"]:
             frames["age_max"] = age
         frames["last_age"] = age
+        if frames["applied"] == AGE_CHECK_FRAMES and self.compensate:
+            self._check_frame_ages(frames["age_sum"] / AGE_CHECK_FRAMES)
+
+    def _check_frame_ages(self, mean):
+        """Warn when the frames' mean age says camera_latency or their stamps are wrong.
+
+        A frame is applied at a joint sample, its age measured from the capture time its
+        stamp gives (less ``camera_stamp_delay``).  Far below ``camera_latency`` (under a
+        quarter of it): most likely a driver that stamps frames when it receives them, so
+        each frame is applied as if just captured and the arm runs that far behind the
+        trajectory (docs/latency.md).  Far above it (twice it and 10 ms more): the derived
+        gains assume a faster camera than this one, or the stamps are on another clock.
+        """
+        told = self.config["camera_latency"]
+        ms, told_ms = 1e3 * mean, 1e3 * told
+        if told >= 0.01 and mean < 0.25 * told:
+            log.warning("the camera's frames are applied %.1f ms after their stamps (the mean "
+                        "of the first %d), while camera_latency says %.0f ms: if the camera's "
+                        "driver stamps frames when it receives them, set camera_stamp_delay to "
+                        "the time from capture to its stamp (a frame taken for fresher than it "
+                        "is leaves the arm that far behind the trajectory); if the camera is "
+                        "that fast, set camera_latency (the derived gains assume it)",
+                        ms, AGE_CHECK_FRAMES, told_ms)
+        elif mean > 2.0 * told + 0.01:
+            log.warning("the camera's frames are applied %.1f ms after their stamps (the mean "
+                        "of the first %d), while camera_latency says %.0f ms: the derived gains "
+                        "assume the faster camera; set camera_latency to what the camera "
+                        "delivers, or check that the frames' stamps and the joint states' are "
+                        "on the same clock", ms, AGE_CHECK_FRAMES, told_ms)
 
     def _step_predicted(self, t, q, qd, frame, stamp, problems):
         """Latency compensation: the law sees x_hat, the frame re-predicted to now.
