@@ -151,8 +151,6 @@ def _nodes(context):
     ]
     shutdown = EmitEvent(event=Shutdown(reason="sim_node exited"))
     actions = [
-        # the controller_manager's parameter file, written above, goes when the launch ends
-        removed_on_shutdown(handle.name),
         # the effort controller would go on sending the last command of a stopped controller
         RegisterEventHandler(OnProcessExit(target_action=controller_node, on_exit=_unspawn)),
         LogInfo(msg=f"{os.path.basename(params_file)} through ros2_control: controller_manager "
@@ -166,7 +164,9 @@ def _nodes(context):
         cmd += ["--topics"] + sorted(TOPICS) + [HARDWARE_COMMANDS, HARDWARE_STATES]
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
-    return nodes + actions
+    # the controller_manager's parameter file, written above, goes when the launch ends,
+    # also when a node cannot start (registered before the nodes are executed)
+    return [removed_on_shutdown(handle.name)] + nodes + actions
 
 
 def generate_launch_description():

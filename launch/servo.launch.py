@@ -132,6 +132,7 @@ def _nodes(context):
                                                      process_matcher=matches_action(controller)))]
         actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
                                                           on_exit=unless_failed(on_exit))))
+    cleanup = []
     if record:
         bag_dir = recording_folder(context)
         cmd = ["ros2", "bag", "record", "-s", "mcap"]
@@ -143,14 +144,15 @@ def _nodes(context):
             # the file, written now, is removed when the launch shuts down
             overrides = recorder_qos_overrides(topics)
             cmd += ["--qos-profile-overrides-path", overrides]
-            actions.append(removed_on_shutdown(overrides))
+            # (registered before the processes start: also when one cannot)
+            cleanup.append(removed_on_shutdown(overrides))
         if camera_mode == "rendered" and record_pictures:
             topics += sorted(CAMERA_TOPICS)
             cmd += ["--storage-preset-profile", "zstd_fast"]
         cmd += ["--topics"] + topics
         actions += [LogInfo(msg="recording: " + " ".join(cmd)),
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
-    return nodes + actions
+    return cleanup + nodes + actions
 
 
 def generate_launch_description():
