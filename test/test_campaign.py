@@ -177,9 +177,9 @@ def test_shipped_specs_resolve():
     names = sorted(os.listdir(os.path.join(ROOT, "config", "campaigns")))
     assert names == ["compare.yaml", "late_stamps_paper_urdf.yaml", "noise_preset_1000.yaml",
                      "noise_preset_sweep.yaml", "noisy_pixels_iiwa.yaml",
-                     "real_camera_iiwa.yaml", "real_camera_panda.yaml",
-                     "real_camera_paper_urdf.yaml", "robustness.yaml",
-                     "start_and_estimates.yaml"]
+                     "real_camera_iiwa.yaml", "real_camera_own_guess.yaml",
+                     "real_camera_panda.yaml", "real_camera_paper_urdf.yaml",
+                     "robustness.yaml", "start_and_estimates.yaml"]
     runs = {name: load_spec(os.path.join(ROOT, "config", "campaigns", name)).runs()
             for name in names}
     for name, spec_runs in runs.items():
@@ -196,6 +196,13 @@ def test_shipped_specs_resolve():
     for run in late:
         draw = real[run.index // 4].factors
         assert {k: run.factors[k] for k in draw} == draw
+    # each shipped arm with its file's own guess: no estimate_scale factor
+    own = runs["real_camera_own_guess.yaml"]
+    assert len(own) == 3 * 40
+    assert {os.path.basename(r.base) for r in own} == {"iiwa_3points.yaml",
+                                                       "panda_2points.yaml",
+                                                       "paper_3dof_urdf.yaml"}
+    assert not any("estimate_scale" in key for r in own for key in r.factors)
     compare = runs["compare.yaml"]
     assert len(compare) == 12 * 3 * 5
     assert {r.controller for r in compare} == set(CONTROLLER_NAMES)
