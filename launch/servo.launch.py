@@ -71,8 +71,8 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from visual_adaptive_servo.recording.recorder import CAMERA_TOPICS, TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
-    node_parameters, rate_arguments, rates, recorder_qos_overrides, recording_folder, \
-    removed_on_shutdown, sim_duration, unless_failed
+    node_parameters, parameter_file, rate_arguments, rates, recorder_qos_overrides, \
+    recording_folder, removed_on_shutdown, sim_duration, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 # s of wall time between a node's exit (recording in lockstep: the controller's) and the shutdown
@@ -99,24 +99,29 @@ def _nodes(context):
                   "publish_every_sample": record and timing_mode == "lockstep"}
     controller.update(rates(context))
     controller.update(node_parameters(context))
+    # the launch's own parameters of each node: in files removed at shutdown (registered
+    # before the processes start, so also when one cannot), not dicts, whose files
+    # launch_ros leaves in the temporary folder
+    cleanup = []
+    sim_params = {"timing_mode": timing_mode, "camera_mode": camera_mode,
+                  "render.enabled": render,
+                  "start.wait_for_recorder": record,
+                  "start.recorder_takes_pictures": record_pictures,
+                  **sim_duration(context), **node_parameters(context)}
 
     nodes = [
         Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
-             parameters=[params_file, {"timing_mode": timing_mode, "camera_mode": camera_mode,
-                                       "render.enabled": render,
-                                       "start.wait_for_recorder": record,
-                                       "start.recorder_takes_pictures": record_pictures,
-                                       **sim_duration(context), **node_parameters(context)}]),
+             parameters=[params_file, parameter_file(sim_params, cleanup)]),
         Node(package=PACKAGE, executable="controller_node", name="controller_node",
              output="screen",
-             parameters=[params_file, controller]),
+             parameters=[params_file, parameter_file(controller, cleanup)]),
     ]
     if camera_mode == "rendered":
+        detector = {"timing_mode": timing_mode, "recorded": record,
+                    **node_parameters(context)}
         nodes.append(Node(package=PACKAGE, executable="feature_detector",
                           name="feature_detector", output="screen",
-                          parameters=[params_file, {"timing_mode": timing_mode,
-                                                    "recorded": record,
-                                                    **node_parameters(context)}]))
+                          parameters=[params_file, parameter_file(detector, cleanup)]))
     actions = [LogInfo(msg=f"{os.path.basename(params_file)}: {timing_mode}, camera "
                            f"{camera_mode}")]
     sim, controller = nodes[0], nodes[1]
@@ -132,7 +137,6 @@ def _nodes(context):
                                                      process_matcher=matches_action(controller)))]
         actions.append(RegisterEventHandler(OnProcessExit(target_action=node,
                                                           on_exit=unless_failed(on_exit))))
-    cleanup = []
     if record:
         bag_dir = recording_folder(context)
         cmd = ["ros2", "bag", "record", "-s", "mcap"]

@@ -89,10 +89,15 @@ def generate_test_description():
 
 
 def _overrides_files():
-    """The recorder QoS-override files of lockstep recordings now in the temporary folder."""
+    """The files a launch writes in the temporary folder, now there.
+
+    The recorder's QoS overrides (lockstep recordings), the nodes' launch parameters
+    (servo.launch.py's), and launch_ros's files of parameter dicts (which it never
+    removes: servo.launch.py passes none).
+    """
     folder = tempfile.gettempdir()
     return {name for name in os.listdir(folder)
-            if name.startswith("vas-recorder-qos-") and name.endswith(".yaml")}
+            if name.startswith(("vas-recorder-qos-", "vas-launch-params-", "launch_params_"))}
 
 
 def _recorder_pid(bag_dir):
@@ -144,8 +149,9 @@ class TestBag(unittest.TestCase):
     def test_every_process_exits_cleanly(self, proc_info):
         launch_testing.asserts.assertExitCodes(proc_info)
 
-    def test_the_recorder_qos_file_is_removed_at_shutdown(self, overrides_before):
-        # the launch writes one for the recorder (keep all, lockstep) and removes it at the end
+    def test_the_launch_leaves_no_file_in_the_temporary_folder(self, overrides_before):
+        # it writes the recorder's QoS file (keep all, lockstep) and the nodes' parameters,
+        # and removes them at the end
         self.assertEqual(_overrides_files() - overrides_before, set())
 
     def test_bag_holds_every_period_once(self, bag_dir):

@@ -93,6 +93,20 @@ def recorder_qos_overrides(topics, folder=None):
     return path
 
 
+def parameter_file(values, cleanup):
+    """A parameter file of ``values`` for the node it is given to; removed at shutdown.
+
+    What launch_ros does with a dict of parameters (a ``/**`` YAML in the temporary
+    folder), except that launch_ros leaves its files behind (ros2/launch_ros#5), one per
+    node and launch; the action that removes this one is appended to ``cleanup``.
+    """
+    handle, path = tempfile.mkstemp(prefix="vas-launch-params-", suffix=".yaml")
+    with open(handle, "w", encoding="utf-8") as stream:
+        yaml.safe_dump({"/**": {"ros__parameters": values}}, stream)
+    cleanup.append(removed_on_shutdown(path))
+    return path
+
+
 def removed_on_shutdown(path):
     """An action that deletes the file ``path`` the launch wrote when the launch shuts down."""
     return RegisterEventHandler(OnShutdown(
