@@ -137,15 +137,21 @@ def main(argv=None):
     parser.add_argument("--duration", type=float, default=30.0)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="runs/unseen_arms")
+    parser.add_argument("--guess-scale", type=float, default=1.0,
+                        help="the guessed camera's and lengths' errors times this (2: the "
+                             "camera 0.3 m off per axis, focal length and lengths x0.6-1.5)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None)
     args = parser.parse_args(argv)
     if args.arms < 1 or args.workers < 1 or not args.duration > 0.0:
         parser.error("--arms and --workers must be >= 1 and --duration > 0")
+    if not 0.0 <= args.guess_scale < 4.0:
+        parser.error("--guess-scale must be in [0, 4) (4: lengths guessed x0 at worst), got "
+                     f"{args.guess_scale}")
 
     folder = os.path.join(args.out, "arms")
     started = time.perf_counter()
-    arms = [random_arm(seed, folder) for seed in
+    arms = [random_arm(seed, folder, guess_scale=args.guess_scale) for seed in
             range(args.first_seed, args.first_seed + args.arms)]
     drawn = time.perf_counter() - started
     names = [name for name, _ in conditions(args.noise_seeds)]
@@ -169,15 +175,16 @@ def main(argv=None):
         writer.writerows(rows)
     table = summarize(rows, names)
     result = {"environment": environment(), "arms": args.arms, "first_seed": args.first_seed,
-              "duration_s": args.duration, "set": args.set, "wall_s": wall, "draw_s": drawn,
+              "duration_s": args.duration, "guess_scale": args.guess_scale, "set": args.set,
+              "wall_s": wall, "draw_s": drawn,
               "joints": {str(n): sum(a.n == n for a in arms) for n in range(3, 7)},
               "points": {str(m): sum(a.m == m for a in arms) for m in range(1, 4)},
               "conditions": table}
     with open(os.path.join(args.out, "summary.json"), "w", encoding="utf-8") as handle:
         json.dump(result, handle, indent=2)
         handle.write("\n")
-    title = f"{args.arms} unseen arms, defaults" + (f" ({', '.join(args.set)})" if args.set
-                                                    else "")
+    notes = args.set + ([f"guess x{args.guess_scale:g}"] if args.guess_scale != 1.0 else [])
+    title = f"{args.arms} unseen arms, defaults" + (f" ({', '.join(notes)})" if notes else "")
     plot(rows, names, os.path.join(args.out, "unseen_arms.png"), title)
     print("| condition | runs | diverged | p50 / p90 / max true RMS [px] |\n|---|---:|---:|---|")
     for name, row in table.items():

@@ -25,7 +25,9 @@ on arms nobody tuned them for (benchmarks/unseen_arms.py runs many):
 * a camera 1.2-2.5 m from the arm, looking at its workspace;
 * the controller's guess of the camera: moved by 0.15 m (each axis, normal) and aimed
   0.1 m off, focal length x0.8-1.25, each pixel scale x0.9-1.1; lengths x0.8-1.25 and
-  inertial parameters x0.5-2 (``initial_estimate``);
+  inertial parameters x0.5-2 (``initial_estimate``); ``guess_scale`` g multiplies each
+  of these kinematic errors (the moves, and each factor's distance from 1: g = 2 gives
+  0.3 m, focal length x0.6-1.5, lengths x0.6-1.5), the same draws otherwise;
 * the desired trajectory taught on the simulated arm (:func:`..teach.teach`: each joint
   0.15 rad around the start over 20 s), so that the points can follow it.
 
@@ -130,8 +132,14 @@ def _camera(position, target, focal_length, pixel_scale):
             "pixel_origin": [0.0, 0.0], "pixel_axes": [1.0, 1.0]}
 
 
-def _draw(rng, name):
+def _draw(rng, name, guess_scale=1.0):
     """One candidate: (urdf text, sim section, controller section) without a trajectory."""
+    g = float(guess_scale)
+
+    def off(factor):
+        """A guess's factor with its distance from 1 times g (the same draw at g = 1)."""
+        return 1.0 + g * (factor - 1.0)
+
     n = int(rng.integers(3, 7))
     m = int(min(3, rng.integers(1, n // 2 + 1)))
     urdf, tip, reach, prismatic = _urdf(rng, name, n)
@@ -149,8 +157,9 @@ def _draw(rng, name):
                                              np.sin(elevation)])
     focal, scale = rng.uniform(0.006, 0.012), 1e5
     camera = _camera(position, target, focal, (scale, scale))
-    guess = _camera(position + rng.normal(0.0, 0.15, 3), target + rng.normal(0.0, 0.1, 3),
-                    focal * rng.uniform(0.8, 1.25), scale * rng.uniform(0.9, 1.1, 2))
+    guess = _camera(position + g * rng.normal(0.0, 0.15, 3),
+                    target + g * rng.normal(0.0, 0.1, 3),
+                    focal * off(rng.uniform(0.8, 1.25)), scale * off(rng.uniform(0.9, 1.1, 2)))
     urdf_file = f"{name}.urdf"
     sim = {"urdf": urdf_file, "base_link": "world", "tip_link": tip,
            "feature_points": points, "physics_dt": 0.001, "control_period": 0.001,
@@ -159,17 +168,18 @@ def _draw(rng, name):
                   "feature_points": points, "unknown_lengths": ["all"], "sample_time": 0.001,
                   "camera_rate": 0.0, "camera_latency": 0.0,
                   "initial_estimate": {"camera": guess,
-                                       "length_scale": float(rng.uniform(0.8, 1.25)),
+                                       "length_scale": float(off(rng.uniform(0.8, 1.25))),
                                        "inertia_scale": float(rng.uniform(0.5, 2.0))},
                   "image_bounds": [0.0, 640.0, 0.0, 480.0]}
     return urdf, sim, controller, n, m, any(prismatic)
 
 
-def random_arm(seed, folder, attempts=200):
+def random_arm(seed, folder, attempts=200, guess_scale=1.0):
     """Draw the arm of ``seed`` into ``folder``; return its :class:`UnseenArm`.
 
     Writes ``arm<seed>.urdf``, ``arm<seed>.yaml`` and ``arm<seed>_trajectory.csv``.  The
-    same seed gives the same arm.  Raises RuntimeError when no draw passes in
+    same seed gives the same arm.  ``guess_scale`` multiplies the initial estimate's
+    kinematic errors (module docstring).  Raises RuntimeError when no draw passes in
     ``attempts``.
     """
     os.makedirs(folder, exist_ok=True)
@@ -177,7 +187,7 @@ def random_arm(seed, folder, attempts=200):
     name = f"arm{seed}"
     path = os.path.join(folder, f"{name}.yaml")
     for _ in range(attempts):
-        urdf, sim, controller, n, m, prismatic = _draw(rng, name)
+        urdf, sim, controller, n, m, prismatic = _draw(rng, name, guess_scale)
         with open(os.path.join(folder, f"{name}.urdf"), "w", encoding="utf-8") as handle:
             handle.write(urdf)
         try:
