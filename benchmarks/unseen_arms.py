@@ -30,7 +30,8 @@ For each run: diverged or not (and why), the true tracking error's RMS over the 
 Usage::
 
     python benchmarks/unseen_arms.py [--arms 64] [--first-seed 1] [--noise-seeds 1 2]
-        [--duration 30] [--workers 2] [--out runs/unseen_arms] [--set KEY=VALUE ...]
+        [--duration 30] [--workers 2] [--out runs/unseen_arms] [--guess-scale 1]
+        [--set KEY=VALUE ...]
 
 Writes OUT/results.csv (a row per run), OUT/summary.json, OUT/unseen_arms.png (each
 condition's errors, sorted; divergences marked) and OUT/arms/ (the drawn files: rerun
