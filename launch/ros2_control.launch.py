@@ -51,7 +51,6 @@ controller_node's rates of its state topics and /diagnostics (empty: 100 Hz and
 """
 
 import os
-import tempfile
 
 import yaml
 from ament_index_python.packages import get_package_share_directory
@@ -77,7 +76,7 @@ from visual_adaptive_servo.config.scenario import load_scenario
 from visual_adaptive_servo.recording.recorder import TOPICS
 from visual_adaptive_servo.ros.launch_args import duration_argument, node_arguments, \
     node_parameters, rate_arguments, rates, recording_folder, removed_on_shutdown, \
-    sim_duration, unless_failed
+    sim_duration, temporary_yaml, unless_failed
 
 PACKAGE = "visual_adaptive_servo"
 HARDWARE_COMMANDS = "/sim_node/joint_commands"
@@ -120,9 +119,7 @@ def _nodes(context):
     with open(controllers_file, encoding="utf-8") as handle:
         manager = controller_manager_parameters(yaml.safe_load(handle), sim.joint_names,
                                                 sim.control_period)
-    with tempfile.NamedTemporaryFile("w", prefix="vas_ros2_control_", suffix=".yaml",
-                                     delete=False, encoding="utf-8") as handle:
-        yaml.safe_dump(manager, handle)
+    manager_file = temporary_yaml("vas_ros2_control_", manager)
     rate = manager["controller_manager"]["ros__parameters"]["update_rate"]
 
     controller_node = Node(package=PACKAGE, executable="controller_node", name="controller_node",
@@ -140,7 +137,7 @@ def _nodes(context):
                                            **node_parameters(context)}]),
         Node(package="controller_manager", executable="ros2_control_node",
              name="controller_manager", output="screen",
-             parameters=[handle.name, {"use_sim_time": True}]),
+             parameters=[manager_file, {"use_sim_time": True}]),
         # both in one switch: controller_node starts tracking at its first /joint_states, so
         # the broadcaster must not run before the effort controller passes its commands on
         Node(package="controller_manager", executable="spawner", output="screen",
@@ -166,7 +163,7 @@ def _nodes(context):
                     ExecuteProcess(cmd=cmd, output="screen", name="bag_record")]
     # the controller_manager's parameter file, written above, goes when the launch ends,
     # also when a node cannot start (registered before the nodes are executed)
-    return [removed_on_shutdown(handle.name)] + nodes + actions
+    return [removed_on_shutdown(manager_file)] + nodes + actions
 
 
 def generate_launch_description():

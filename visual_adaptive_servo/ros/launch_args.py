@@ -87,9 +87,18 @@ def recorder_qos_overrides(topics, folder=None):
     """
     overrides = {topic: {"history": "keep_all", "reliability": "reliable",
                          "durability": "volatile"} for topic in topics}
-    handle, path = tempfile.mkstemp(prefix="vas-recorder-qos-", suffix=".yaml", dir=folder)
+    return temporary_yaml("vas-recorder-qos-", overrides, folder)
+
+
+def temporary_yaml(prefix, data, folder=None):
+    """The path of a new ``<prefix>*.yaml`` holding ``data`` in ``folder`` (default: $TMPDIR).
+
+    The files the launch files write for their processes (each removed at shutdown with
+    :func:`removed_on_shutdown`).
+    """
+    handle, path = tempfile.mkstemp(prefix=prefix, suffix=".yaml", dir=folder)
     with open(handle, "w", encoding="utf-8") as stream:
-        yaml.safe_dump(overrides, stream)
+        yaml.safe_dump(data, stream)
     return path
 
 
@@ -100,9 +109,7 @@ def parameter_file(values, cleanup):
     folder), except that launch_ros leaves its files behind (ros2/launch_ros#5), one per
     node and launch; the action that removes this one is appended to ``cleanup``.
     """
-    handle, path = tempfile.mkstemp(prefix="vas-launch-params-", suffix=".yaml")
-    with open(handle, "w", encoding="utf-8") as stream:
-        yaml.safe_dump({"/**": {"ros__parameters": values}}, stream)
+    path = temporary_yaml("vas-launch-params-", {"/**": {"ros__parameters": values}})
     cleanup.append(removed_on_shutdown(path))
     return path
 
