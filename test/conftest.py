@@ -30,10 +30,12 @@ a skip of the whole test folder: "collected 0 items / 1 skipped" and exit status
 module.
 """
 
+import atexit
 import contextlib
 import logging
 import os
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -157,6 +159,27 @@ def installed_share(ros2_command=False):
     if ros2_command and shutil.which("ros2") is None:
         pytest.skip("the ros2 command is not on the PATH", allow_module_level=True)
     return share
+
+
+def short_params_file(share, duration, folder=None):
+    """The installed config/paper_3dof.yaml with ``sim_node.duration`` set; its path.
+
+    For the launch tests: written as ``paper_<duration>s.yaml`` into ``folder``, or without
+    one into a temporary file removed when the test process exits.
+    """
+    import yaml
+
+    with open(os.path.join(share, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
+        params = yaml.safe_load(handle)
+    params["sim_node"]["ros__parameters"]["duration"] = duration
+    if folder is None:
+        handle, path = tempfile.mkstemp(suffix=".yaml")
+        atexit.register(os.remove, path)
+    else:
+        handle = path = os.path.join(folder, f"paper_{duration:g}s.yaml")
+    with open(handle, "w", encoding="utf-8") as stream:
+        yaml.safe_dump(params, stream)
+    return path
 
 
 @contextlib.contextmanager

@@ -21,9 +21,7 @@ have exited with status 0.  Skipped
 without launch_testing or when the package is not installed (colcon build).
 """
 
-import atexit
 import os
-import tempfile
 import unittest
 
 import pytest
@@ -32,26 +30,14 @@ pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
 
 import launch_testing.actions
 import launch_testing.asserts
-import yaml
 from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 
 from launch import LaunchDescription
 
-from conftest import installed_share
+from conftest import installed_share, short_params_file
 
 SHARE = installed_share()
-
-
-def _short_params_file():
-    with open(os.path.join(SHARE, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
-        params = yaml.safe_load(handle)
-    params["sim_node"]["ros__parameters"]["duration"] = 2.0
-    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False,
-                                     encoding="utf-8") as handle:
-        yaml.safe_dump(params, handle)
-    atexit.register(os.remove, handle.name)
-    return handle.name
 
 
 @pytest.mark.launch_test
@@ -60,7 +46,7 @@ def generate_test_description():
         SetEnvironmentVariable("ROS_DOMAIN_ID", str(150 + os.getpid() % 50)),
         IncludeLaunchDescription(
             PythonLaunchDescriptionSource(os.path.join(SHARE, "launch", "paper_3dof.launch.py")),
-            launch_arguments={"params_file": _short_params_file()}.items()),
+            launch_arguments={"params_file": short_params_file(SHARE, 2.0)}.items()),
         launch_testing.actions.ReadyToTest(),
     ])
 

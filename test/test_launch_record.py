@@ -43,11 +43,10 @@ pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
 
 import launch_testing.actions
 import launch_testing.asserts
-import yaml
 from launch.actions import IncludeLaunchDescription, SetEnvironmentVariable
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 
-from conftest import bag_counts, bag_messages, installed_share
+from conftest import bag_counts, bag_messages, installed_share, short_params_file
 from launch import LaunchDescription
 from visual_adaptive_servo.recording import messages as m
 from visual_adaptive_servo.recording.bag_report import bag_figures, read_bag
@@ -61,21 +60,11 @@ RECORDER_GRACE = 1.0    # s: servo.launch.py's, from the controller's exit to th
 SHARE = installed_share()
 
 
-def _short_params_file(folder):
-    with open(os.path.join(SHARE, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
-        params = yaml.safe_load(handle)
-    params["sim_node"]["ros__parameters"]["duration"] = DURATION
-    path = os.path.join(folder, "paper_2s.yaml")
-    with open(path, "w", encoding="utf-8") as handle:
-        yaml.safe_dump(params, handle)
-    return path
-
-
 @pytest.mark.launch_test
 def generate_test_description():
     folder = tempfile.mkdtemp(prefix="vas-record-")
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
-    params_file, bag_dir = _short_params_file(folder), os.path.join(folder, "bag")
+    params_file, bag_dir = short_params_file(SHARE, DURATION, folder), os.path.join(folder, "bag")
     overrides_before = _overrides_files()
     return LaunchDescription([
         SetEnvironmentVariable("ROS_DOMAIN_ID", str(100 + os.getpid() % 50)),

@@ -25,7 +25,6 @@ joint_state_topic_hardware_interface in the ament index; that skip is in the
 test, so that the other test files of the session still run).
 """
 
-import atexit
 import os
 import tempfile
 import unittest
@@ -36,7 +35,6 @@ pytest.importorskip("launch_testing", reason="needs ROS 2 launch_testing")
 
 import launch_testing.actions
 import launch_testing.asserts
-import yaml
 from ament_index_python.packages import (
     PackageNotFoundError,
     get_package_share_directory,
@@ -46,14 +44,11 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource
 
 from launch import LaunchDescription
 
-PACKAGE = "visual_adaptive_servo"
+from conftest import installed_share, short_params_file
+
 ROS2_CONTROL = ("controller_manager", "joint_state_broadcaster", "effort_controllers",
                 "joint_state_topic_hardware_interface")
-try:
-    SHARE = get_package_share_directory(PACKAGE)
-except PackageNotFoundError:
-    pytest.skip(f"{PACKAGE} is not installed in an ament index (colcon build it first)",
-                allow_module_level=True)
+SHARE = installed_share()
 
 
 def _missing(names):
@@ -72,17 +67,6 @@ MISSING = _missing(ROS2_CONTROL)
 SKIP_REASON = f"ros2_control is not installed (no {', '.join(MISSING)} in the ament index)"
 
 
-def _short_params_file():
-    with open(os.path.join(SHARE, "config", "paper_3dof.yaml"), encoding="utf-8") as handle:
-        params = yaml.safe_load(handle)
-    params["sim_node"]["ros__parameters"]["duration"] = 3.0
-    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False,
-                                     encoding="utf-8") as handle:
-        yaml.safe_dump(params, handle)
-    atexit.register(os.remove, handle.name)
-    return handle.name
-
-
 @pytest.mark.launch_test
 def generate_test_description():
     if MISSING:
@@ -97,7 +81,7 @@ def generate_test_description():
         IncludeLaunchDescription(
             PythonLaunchDescriptionSource(os.path.join(SHARE, "launch",
                                                        "ros2_control.launch.py")),
-            launch_arguments={"params_file": _short_params_file()}.items()),
+            launch_arguments={"params_file": short_params_file(SHARE, 3.0)}.items()),
         launch_testing.actions.ReadyToTest(),
     ]), {"before": before}
 
