@@ -315,8 +315,9 @@ def bag_figures(rec, window=RMS_WINDOW_S):
             # at the estimate's last stamp (the two topics may end apart: other rates, or
             # a recorder that lost the last messages of one)
             last, true = times[ESTIMATED_DEPTH][-1], sig[TRUE_DEPTH]
-            error = z_hat[-1] - true.values[int(np.nanargmin(np.abs(true.t - last)))] \
-                if np.isfinite(last) and np.isfinite(true.t).any() else z_hat[-1] - true.values[-1]
+            at = (int(np.nanargmin(np.abs(true.t - last)))
+                  if np.isfinite(last) and np.isfinite(true.t).any() else -1)
+            error = z_hat[-1] - true.values[at]
             figures["final_depth_error"] = (float(error[0]) if error.size == 1
                                             else error.tolist())
     lost = {topic: len(sig[partner].t) - len(sig[topic].t)
